@@ -1,0 +1,123 @@
+"""varflow: classical variational optical flow and dense trajectory estimation.
+
+Public API
+----------
+flow(frame0, frame1, method="tvl1", **params)
+    Dense flow ``(H, W, 2)`` float32 from ``frame0`` to ``frame1``.
+methods()
+    Names of the registered methods.
+read_flo / write_flo / read_kitti_png / write_kitti_png / read_image
+    File I/O.
+flow_to_color
+    Middlebury colour coding.
+endpoint_error / angular_error / rms_endpoint_error / evaluate
+    Metrics.
+
+Conventions: images are uint8, uint16 or float in [0, 1], ``(H, W)`` or
+``(H, W, C)``; flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal
+component u and ``[..., 1]`` the vertical component v; unknown flow is NaN.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .registry import METHODS, get_method, make_params
+from .twoframe.coarse_to_fine import ProgressCallback, coarse_to_fine
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "__version__",
+    "flow",
+    "methods",
+    "make_params",
+    "METHODS",
+    "read_flo",
+    "write_flo",
+    "read_kitti_png",
+    "write_kitti_png",
+    "read_image",
+    "read_flow",
+    "write_flow",
+    "flow_to_color",
+    "endpoint_error",
+    "angular_error",
+    "rms_endpoint_error",
+    "evaluate",
+]
+
+
+def methods() -> list[str]:
+    """Names of the registered two-frame methods (see :data:`varflow.registry.METHODS`)."""
+    return sorted(METHODS)
+
+
+def flow(
+    frame0: np.ndarray,
+    frame1: np.ndarray,
+    method: str = "tvl1",
+    *,
+    params: Any = None,
+    init_flow: np.ndarray | None = None,
+    callback: ProgressCallback | None = None,
+    **overrides: Any,
+) -> np.ndarray:
+    """Estimate dense optical flow from ``frame0`` to ``frame1``.
+
+    Parameters
+    ----------
+    frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
+        uint8, uint16, or float in [0, 1].  Colour frames use a vector-valued data
+        term (one residual per channel), not a conversion to grey.
+    method : str
+        A name from :func:`methods`.
+    params : dataclass, optional
+        A parameter object of the method (e.g. :class:`varflow.twoframe.tvl1.TVL1Params`).
+    init_flow : ndarray, shape (H, W, 2), optional
+        Initial estimate.
+    callback : callable, optional
+        ``callback(done, total)`` after every warp (for progress bars).
+    **overrides
+        Parameter fields to change, e.g. ``data_weight=30.0``.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+        ``[..., 0]`` = u (x, columns), ``[..., 1]`` = v (y, rows): ``frame1`` at
+        ``(x + u, y + v)`` matches ``frame0`` at ``(x, y)``.
+
+    Raises
+    ------
+    ValueError
+        Unknown method or parameter, invalid parameter value, or bad input arrays.
+    """
+    m = get_method(method)
+    p = make_params(m, params, **overrides)
+    return coarse_to_fine(frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback)
+
+
+def __getattr__(name: str) -> Any:
+    # I/O, visualisation and metrics are imported on first use to keep start-up light.
+    lazy = {
+        "read_flo": ("io.flo", "read_flo"),
+        "write_flo": ("io.flo", "write_flo"),
+        "read_kitti_png": ("io.kitti_png", "read_kitti_png"),
+        "write_kitti_png": ("io.kitti_png", "write_kitti_png"),
+        "read_image": ("io.images", "read_image"),
+        "read_flow": ("io.images", "read_flow"),
+        "write_flow": ("io.images", "write_flow"),
+        "flow_to_color": ("viz.colorwheel", "flow_to_color"),
+        "endpoint_error": ("evaluation.metrics", "endpoint_error"),
+        "angular_error": ("evaluation.metrics", "angular_error"),
+        "rms_endpoint_error": ("evaluation.metrics", "rms_endpoint_error"),
+        "evaluate": ("evaluation.metrics", "evaluate"),
+    }
+    if name in lazy:
+        import importlib
+
+        mod, attr = lazy[name]
+        return getattr(importlib.import_module(f".{mod}", __name__), attr)
+    raise AttributeError(f"module 'varflow' has no attribute {name!r}")

@@ -1,0 +1,217 @@
+"""Reading and writing images and flow files.
+
+Images are returned as NumPy arrays with the bit depth of the file: ``uint8`` or
+``uint16``, shape ``(H, W)`` for grey and ``(H, W, 3)`` for colour.  Alpha
+channels are dropped and palettes expanded to RGB.  Most formats are handled by
+Pillow; 16-bit PNGs go through the PNG codec of :mod:`varflow.io.kitti_png`
+because Pillow reduces 16-bit colour PNGs to 8 bits.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from ._atomic import atomic_write
+from .flo import read_flo, write_flo
+from .kitti_png import PNG_SIGNATURE, decode_png16, encode_png16, read_kitti_png, write_kitti_png
+
+__all__ = ["read_image", "write_image", "read_flow", "write_flow"]
+
+logger = logging.getLogger(__name__)
+
+_16BIT_MODES = ("I;16", "I;16L", "I;16B", "I;16N")
+_TO_RGB_MODES = ("P", "PA", "RGBA", "RGBa", "RGBX", "CMYK", "YCbCr", "LAB", "HSV")
+_TO_GREY_MODES = ("1", "LA", "La")
+
+
+def _require_file(path: Path, what: str) -> None:
+    if not path.exists():
+        raise FileNotFoundError(2, f"{what} not found", str(path))
+
+
+def _png16_header(head: bytes) -> bool:
+    """True if ``head`` starts a non-interlaced 16-bit grey/GA/RGB/RGBA PNG."""
+    if len(head) < 33 or head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR":
+        return False
+    depth, colour, _, _, interlace = struct.unpack(">BBBBB", head[24:29])
+    return depth == 16 and colour in (0, 2, 4, 6) and interlace == 0
+
+
+def _from_pillow(img: Image.Image, path: Path) -> np.ndarray:
+    mode = img.mode
+    if mode in _TO_RGB_MODES:
+        img = img.convert("RGBA" if mode in ("P", "PA") else "RGB").convert("RGB")
+    elif mode in _TO_GREY_MODES:
+        img = img.convert("L")
+    elif mode not in ("L", "RGB", "I", *_16BIT_MODES):
+        raise ValueError(f"{path}: unsupported image mode {mode!r}")
+    arr = np.array(img)
+    if img.mode in _16BIT_MODES:
+        return arr.astype(np.uint16)
+    if img.mode == "I":  # 32-bit integer: accept if it fits 16 bits
+        if arr.size and (arr.min() < 0 or arr.max() > 65535):
+            raise ValueError(f"{path}: integer image values outside 0..65535")
+        return arr.astype(np.uint16)
+    return arr.astype(np.uint8, copy=False)
+
+
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read an image file (PNG, JPEG, PPM/PGM, TIFF, BMP, ... via Pillow).
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    ndarray
+        ``(H, W)`` for grey images, ``(H, W, 3)`` for colour; ``uint8`` for 8-bit
+        files and ``uint16`` for 16-bit files (16-bit PNGs, grey or colour, are
+        decoded at full precision).  RGBA drops alpha, palette images are expanded
+        to RGB, LA drops alpha to L, 1-bit images become ``uint8`` 0/255.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file cannot be decoded as an image or has an unsupported mode.
+    """
+    path = Path(os.fspath(path))
+    _require_file(path, "image file")
+    with open(path, "rb") as f:
+        head = f.read(33)
+    if _png16_header(head):
+        try:
+            arr = decode_png16(path.read_bytes(), path)
+        except ValueError as exc:
+            raise ValueError(f"cannot read image: {exc}") from exc
+        arr = arr[..., :3] if arr.shape[2] >= 3 else arr[..., 0]
+        return np.ascontiguousarray(arr)
+    try:
+        with Image.open(path) as img:
+            img.load()
+            arr = _from_pillow(img, path)
+    except (UnidentifiedImageError, OSError, SyntaxError) as exc:
+        raise ValueError(f"{path}: cannot read image ({exc})") from exc
+    logger.debug("read %s: %s %s", path, arr.shape, arr.dtype)
+    return arr
+
+
+def _pillow_format(path: Path) -> str:
+    fmt = Image.registered_extensions().get(path.suffix.lower())
+    if fmt is None:
+        raise ValueError(f"{path}: unknown image extension {path.suffix!r}")
+    return fmt
+
+
+def encode_image(array: np.ndarray, path: str | os.PathLike[str]) -> bytes:
+    """Encode an image in the format given by the extension of ``path`` (no file is written)."""
+    path = Path(os.fspath(path))
+    fmt = _pillow_format(path)
+    arr = np.asarray(array)
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if arr.ndim not in (2, 3) or arr.size == 0:
+        raise ValueError(f"{path}: expected an image of shape (H, W) or (H, W, 3), got {arr.shape}")
+    if arr.ndim == 3 and arr.shape[2] not in (3, 4):
+        raise ValueError(f"{path}: expected 1, 3 or 4 channels, got {arr.shape[2]}")
+    if arr.dtype == np.uint8:
+        mode = "L" if arr.ndim == 2 else ("RGB" if arr.shape[2] == 3 else "RGBA")
+    elif arr.dtype == np.uint16:
+        if arr.ndim == 3:
+            if fmt != "PNG":
+                raise ValueError(f"{path}: 16-bit colour images can only be written as PNG")
+            return encode_png16(arr)
+        mode = "I;16"
+    else:
+        raise ValueError(f"{path}: expected a uint8 or uint16 image, got dtype {arr.dtype}")
+    buf = io.BytesIO()
+    try:
+        raw = arr.astype(arr.dtype.newbyteorder("<")).tobytes()  # I;16 is little-endian
+        img = Image.frombytes(mode, (arr.shape[1], arr.shape[0]), raw)
+        options = {"quality": 95} if fmt == "JPEG" else {}
+        img.save(buf, format=fmt, **options)
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(
+            f"{path}: cannot write a {arr.dtype} {mode} image as {fmt} ({exc})"
+        ) from exc
+    return buf.getvalue()
+
+
+def write_image(path: str | os.PathLike[str], array: np.ndarray) -> None:
+    """Write an image atomically; the format follows the file extension.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.png``, ``.jpg``, ``.ppm``, ``.pgm``, ``.tif``, ``.bmp``, ... (any
+        extension Pillow can write).
+    array : ndarray
+        ``uint8`` of shape ``(H, W)``, ``(H, W, 3)`` or ``(H, W, 4)``, or ``uint16``
+        of shape ``(H, W)`` (PNG, TIFF, ...) or ``(H, W, 3|4)`` (PNG only).
+
+    Raises
+    ------
+    ValueError
+        On an unknown extension, an unsupported dtype or shape, or a combination
+        the format cannot store (e.g. 16-bit JPEG).
+    """
+    payload = encode_image(array, path)
+    with atomic_write(path, "wb") as f:
+        f.write(payload)
+    logger.debug("wrote %s", path)
+
+
+_FLOW_READERS = {".flo": read_flo, ".png": read_kitti_png}
+_FLOW_WRITERS = {".flo": write_flo, ".png": write_kitti_png}
+
+
+def read_flow(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read a flow file, choosing the format from the extension.
+
+    ``.flo`` -> :func:`~varflow.io.flo.read_flo` (Middlebury),
+    ``.png`` -> :func:`~varflow.io.kitti_png.read_kitti_png` (KITTI).
+
+    Returns
+    -------
+    flow : ndarray, shape (H, W, 2), float32
+        NaN where unknown.
+
+    Raises
+    ------
+    ValueError
+        On an unknown extension.
+    FileNotFoundError, FlowFormatError
+        From the format reader.
+    """
+    path = Path(os.fspath(path))
+    reader = _FLOW_READERS.get(path.suffix.lower())
+    if reader is None:
+        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} (use .flo or .png)")
+    return reader(path)
+
+
+def write_flow(path: str | os.PathLike[str], flow: np.ndarray) -> None:
+    """Write a flow file atomically, choosing the format from the extension.
+
+    ``.flo`` -> :func:`~varflow.io.flo.write_flo`,
+    ``.png`` -> :func:`~varflow.io.kitti_png.write_kitti_png`.
+
+    Raises
+    ------
+    ValueError
+        On an unknown extension or an invalid flow array.
+    """
+    path = Path(os.fspath(path))
+    writer = _FLOW_WRITERS.get(path.suffix.lower())
+    if writer is None:
+        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} (use .flo or .png)")
+    writer(path, flow)

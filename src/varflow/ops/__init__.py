@@ -1,0 +1,1 @@
+"""Low-level operators: finite differences, warping, pyramids, ROF, median, prox."""

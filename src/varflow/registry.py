@@ -1,0 +1,79 @@
+"""The method registry: one plain dict that the API, the CLI and the benchmarks read.
+
+Each entry maps a method name to a :class:`Method`: its frozen parameter dataclass,
+its single-level warp solver (plugged into
+:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`) and a one-line description.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from .twoframe import tvl1 as _tvl1
+from .twoframe.coarse_to_fine import CoarseToFineParams, WarpSolver
+
+__all__ = ["Method", "METHODS", "get_method", "make_params"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered two-frame method.
+
+    Attributes
+    ----------
+    name : str
+    params : type
+        Frozen dataclass of its parameters (a :class:`CoarseToFineParams` subclass).
+    solve_warp : callable
+        Single-level, single-warp solver.
+    description : str
+    """
+
+    name: str
+    params: type[CoarseToFineParams]
+    solve_warp: WarpSolver
+    description: str
+
+
+METHODS: dict[str, Method] = {
+    "tvl1": Method(
+        name="tvl1",
+        params=_tvl1.TVL1Params,
+        solve_warp=_tvl1.solve_warp,
+        description="TV-L1 (colour L1 data term, edge-weighted TV, ROF texture, median)",
+    ),
+}
+
+
+def get_method(name: str) -> Method:
+    """Look a method up by name; unknown names raise ``ValueError`` listing the choices."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ValueError(
+            f"method: unknown method {name!r}; available: {', '.join(sorted(METHODS))}"
+        ) from None
+
+
+def make_params(method: str | Method, params: Any = None, **overrides: Any) -> CoarseToFineParams:
+    """Build a method's parameter object from defaults, an existing object and overrides.
+
+    Raises
+    ------
+    ValueError
+        For an unknown field name (named in the message) or an invalid value.
+    """
+    m = get_method(method) if isinstance(method, str) else method
+    base = params if params is not None else m.params()
+    if not isinstance(base, m.params):
+        raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
+    names = {f.name for f in dataclasses.fields(m.params)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ValueError(
+            f"{unknown[0]}: not a parameter of method {m.name!r} "
+            f"(valid: {', '.join(sorted(names))})"
+        )
+    return dataclasses.replace(base, **overrides) if overrides else base

@@ -1,0 +1,218 @@
+"""The one coarse-to-fine driver that every two-frame method uses.
+
+It owns everything that is not the single-level optimisation: conversion of the
+inputs, structure-texture pre-processing, the image pyramid, the warping of the
+second frame (bicubic, with an inside-the-image mask), the median filter after
+each warp, and the upsampling of the flow between levels.  A method plugs in a
+*warp solver*::
+
+    solve_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state) -> flow
+
+that minimises its energy linearised around ``flow0`` at one pyramid level;
+``state`` is a dict that lives for one level (dual variables, edge weights…);
+``state["previous"]`` holds the state of the coarser level, so a solver can warm
+start its dual variables across levels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from .._validate import check_pair
+from ..ops.differences import image_derivatives
+from ..ops.median import median_filter_flow
+from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_flow
+from ..ops.rof import structure_texture
+from ..ops.warp import warp_bicubic
+
+__all__ = ["CoarseToFineParams", "WarpSolver", "coarse_to_fine", "ProgressCallback"]
+
+log = logging.getLogger(__name__)
+
+ProgressCallback = Callable[[int, int], None]
+
+
+def _check(cond: bool, field: str, msg: str) -> None:
+    if not cond:
+        raise ValueError(f"{field}: {msg}")
+
+
+@dataclass(frozen=True)
+class CoarseToFineParams:
+    """Pyramid, warping and pre-processing parameters shared by two-frame methods.
+
+    Attributes
+    ----------
+    scale_factor : float
+        η, ratio between the sizes of consecutive pyramid levels, in (0, 1).
+        Default 0.8.
+    max_levels : int
+        Maximum number of pyramid levels (the finest included).  Default 40; in
+        practice ``min_size`` decides.
+    min_size : int
+        Smallest allowed side of the coarsest level, pixels.  Default 16.
+    n_warps : int
+        Number of warps (re-linearisations) per level.  Default 5.
+    median_size : int
+        Side of the median filter applied to the flow after each warp (Sun, Roth
+        & Black 2010); 0 or 1 disables it.  Default 5.
+    structure_texture : bool
+        Run on the texture part ``I - α ROF(I)`` (Wedel et al. 2009).  Default True.
+    texture_alpha : float
+        α of the structure-texture blend, in [0, 1].  Default 0.95.
+    rof_theta : float
+        θ of the ROF model used for the structure part (intensity units, images in
+        [0, 1]).  Default 0.125.
+    rof_iterations : int
+        Iterations of the ROF solver.  Default 50.
+    pyramid_sigma : float
+        Anti-alias smoothing: σ = pyramid_sigma · sqrt(η^(-2l) − 1) at level l.
+        Default 0.6.
+    """
+
+    scale_factor: float = 0.8
+    max_levels: int = 40
+    min_size: int = 16
+    n_warps: int = 5
+    median_size: int = 5
+    structure_texture: bool = True
+    texture_alpha: float = 0.95
+    rof_theta: float = 0.125
+    rof_iterations: int = 50
+    pyramid_sigma: float = 0.6
+
+    def __post_init__(self) -> None:
+        _check(
+            0.0 < self.scale_factor < 1.0,
+            "scale_factor",
+            f"must be in (0, 1), got {self.scale_factor}",
+        )
+        _check(self.max_levels >= 1, "max_levels", f"must be >= 1, got {self.max_levels}")
+        _check(self.min_size >= 2, "min_size", f"must be >= 2, got {self.min_size}")
+        _check(self.n_warps >= 1, "n_warps", f"must be >= 1, got {self.n_warps}")
+        _check(
+            self.median_size >= 0 and (self.median_size <= 1 or self.median_size % 2 == 1),
+            "median_size",
+            f"must be 0, 1 or an odd integer, got {self.median_size}",
+        )
+        _check(
+            0.0 <= self.texture_alpha <= 1.0,
+            "texture_alpha",
+            f"must be in [0, 1], got {self.texture_alpha}",
+        )
+        _check(self.rof_theta > 0, "rof_theta", f"must be > 0, got {self.rof_theta}")
+        _check(
+            self.rof_iterations >= 1, "rof_iterations", f"must be >= 1, got {self.rof_iterations}"
+        )
+        _check(self.pyramid_sigma >= 0, "pyramid_sigma", f"must be >= 0, got {self.pyramid_sigma}")
+
+    def replace(self, **changes: Any):
+        """Return a copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+class WarpSolver(Protocol):
+    def __call__(
+        self,
+        I0: np.ndarray,
+        I1w: np.ndarray,
+        I1w_dx: np.ndarray,
+        I1w_dy: np.ndarray,
+        inside: np.ndarray,
+        flow0: np.ndarray,
+        params: Any,
+        state: dict,
+    ) -> np.ndarray: ...
+
+
+def preprocess(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
+    """Apply the configured pre-processing to an ``(H, W, C)`` float image."""
+    if params.structure_texture:
+        return structure_texture(
+            image, alpha=params.texture_alpha, theta=params.rof_theta, n_iter=params.rof_iterations
+        )
+    return image
+
+
+def coarse_to_fine(
+    frame0: np.ndarray,
+    frame1: np.ndarray,
+    solve_warp: WarpSolver,
+    params: CoarseToFineParams,
+    init_flow: np.ndarray | None = None,
+    callback: ProgressCallback | None = None,
+) -> np.ndarray:
+    """Estimate the flow from ``frame0`` to ``frame1`` coarse to fine.
+
+    Parameters
+    ----------
+    frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
+        uint8, uint16 or float in [0, 1]; see :func:`varflow._validate.as_float_image`.
+    solve_warp : callable
+        The method's single-level, single-warp solver (see module docstring).
+    params : CoarseToFineParams (or a subclass)
+    init_flow : ndarray, shape (H, W, 2), optional
+        Initial flow at full resolution; it is downsampled to the coarsest level.
+    callback : callable, optional
+        ``callback(done, total)`` after each warp.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+        ``[..., 0]`` = u (horizontal), ``[..., 1]`` = v (vertical).
+    """
+    I0, I1 = check_pair(frame0, frame1)
+    t_start = time.perf_counter()
+    I0 = preprocess(I0, params)
+    I1 = preprocess(I1, params)
+    shapes = pyramid_shapes(I0.shape[:2], params.max_levels, params.scale_factor, params.min_size)
+    pyr0 = build_pyramid(I0, shapes, params.scale_factor, params.pyramid_sigma)
+    pyr1 = build_pyramid(I1, shapes, params.scale_factor, params.pyramid_sigma)
+    n_levels = len(shapes)
+    total = n_levels * params.n_warps
+    done = 0
+    if init_flow is not None:
+        flow = resize_flow(np.asarray(init_flow, np.float32), shapes[-1])
+    else:
+        flow = np.zeros(shapes[-1] + (2,), np.float32)
+    n_ch = I0.shape[2]
+    state: dict = {}
+    for level in range(n_levels - 1, -1, -1):
+        i0, i1 = pyr0[level], pyr1[level]
+        if flow.shape[:2] != i0.shape[:2]:
+            flow = resize_flow(flow, i0.shape[:2])
+        dx, dy = image_derivatives(i1)
+        planes = np.concatenate([i1, dx, dy], axis=2)
+        state = {"level": level, "previous": state}
+        state["previous"].pop("previous", None)  # keep only one level of history
+        for _ in range(params.n_warps):
+            warped, inside = warp_bicubic(planes, flow)
+            flow = solve_warp(
+                i0,
+                warped[..., :n_ch],
+                warped[..., n_ch : 2 * n_ch],
+                warped[..., 2 * n_ch :],
+                inside,
+                flow,
+                params,
+                state,
+            )
+            if params.median_size > 1:
+                flow = median_filter_flow(flow, params.median_size)
+            done += 1
+            if callback is not None:
+                callback(done, total)
+    log.debug(
+        "coarse_to_fine: %d levels x %d warps in %.3fs",
+        n_levels,
+        params.n_warps,
+        time.perf_counter() - t_start,
+    )
+    return flow
