@@ -1,0 +1,622 @@
+"""The ``varflow`` command line.
+
+Synopsis::
+
+    varflow flow FRAME0 FRAME1 -o OUT.flo|OUT.png [--png COLOUR.png] [--method NAME]
+                 [--max-radius R] [--quiet] [--<parameter> VALUE ...]
+    varflow show FLOW -o OUT.png [--max-radius R] [--legend]
+    varflow eval EST GT [--occlusions MASK.png] [--json]
+    varflow demo [-o DIR] [--quiet]
+    varflow methods [--params] [--markdown]
+    varflow bench middlebury [--data DIR] [--methods tvl1,...] [--sequences ...]
+                             [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
+
+Method parameters become flags automatically: every field of the parameter
+dataclass of every registered method is offered as ``--field-name`` (booleans as
+``--name/--no-name``); only the flags given on the command line are passed on.
+
+Every error ends the program with one line ``varflow: error: ...`` on stderr and
+exit status 2 (130 on Ctrl-C).  Results go to stdout; ``-v`` turns on the library's
+INFO logging on stderr.  Files are written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import math
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from . import __version__
+from .registry import METHODS, get_method, make_params
+
+__all__ = ["main", "parameter_table"]
+
+log = logging.getLogger(__name__)
+
+PROG = "varflow"
+_PARAM_PREFIX = "param__"
+
+
+class _UsageError(Exception):
+    """Raised by the parser instead of printing usage and exiting."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line instead of usage + message
+        raise _UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --------------------------------------------------------------------------- parameters
+
+
+@dataclasses.dataclass(frozen=True)
+class _FieldDoc:
+    name: str
+    symbol: str
+    meaning: str
+
+
+_SYMBOL = re.compile(r"^(?P<sym>[^\W\d_]{1,2}|[^\x00-\x7f]{1,2})(?:,\s+|\s+(?=of\b))(?P<rest>.*)$",
+                     re.S)
+
+
+def _is_header(lines: list[str], i: int) -> bool:
+    """True if ``lines[i]`` is a numpydoc section title (the next line is dashes)."""
+    return i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}
+
+
+def _field_docs(cls: type) -> dict[str, _FieldDoc]:
+    """Parse the numpydoc ``Attributes`` sections of a dataclass and its bases.
+
+    Returns ``{field: _FieldDoc(name, symbol, meaning)}``; ``symbol`` is the paper
+    symbol when the description starts with one (``"λ, weight of ..."`` or
+    ``"c of the ..."``), and ``meaning`` drops "Default ..." sentences (the default
+    is taken from the dataclass itself).
+    """
+    out: dict[str, _FieldDoc] = {}
+    for klass in reversed(cls.__mro__):
+        doc = klass.__dict__.get("__doc__") or ""
+        lines = doc.expandtabs().splitlines()
+        in_attrs = False
+        current: str | None = None
+        buf: dict[str, list[str]] = {}
+        for i, line in enumerate(lines):
+            stripped = line.strip()
+            if stripped == "Attributes" and _is_header(lines, i):
+                in_attrs = True
+                continue
+            if not in_attrs or set(stripped) == {"-"}:
+                continue
+            indent = len(line) - len(line.lstrip())
+            m = re.match(r"^(\w+)\s*:", stripped)
+            if m and indent <= 4 and stripped:
+                current = m.group(1)
+                buf[current] = []
+            elif stripped and indent <= 4 and _is_header(lines, i):
+                in_attrs = False  # next section
+                current = None
+            elif current is not None and stripped:
+                buf[current].append(stripped)
+        for name, parts in buf.items():
+            sentences = re.split(r"(?<=\.)\s+", " ".join(parts))
+            text = " ".join(t for t in sentences if t and not t.startswith("Default")).strip()
+            sym = ""
+            m = _SYMBOL.match(text)
+            if m:
+                sym = m.group("sym")
+                if text[len(sym)] == ",":  # "λ, weight of ..." -> "Weight of ..."
+                    text = m.group("rest").strip()
+                    text = text[:1].upper() + text[1:]
+            out[name] = _FieldDoc(name, sym, text)
+    return out
+
+
+@dataclasses.dataclass
+class _Param:
+    name: str
+    type: type
+    default: Any
+    owners: list[str]
+    doc: _FieldDoc | None
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+
+def _collect_params() -> dict[str, _Param]:
+    """All scalar fields of all registered methods' parameter classes, in registry order."""
+    params: dict[str, _Param] = {}
+    for mname, method in METHODS.items():
+        docs = _field_docs(method.params)
+        defaults = method.params()
+        for f in dataclasses.fields(method.params):
+            default = getattr(defaults, f.name)
+            if f.name in params:
+                params[f.name].owners.append(mname)
+                continue
+            kind = type(default)
+            if kind not in (bool, int, float, str):
+                log.debug("no CLI flag for %s.%s (type %s)", mname, f.name, kind.__name__)
+                continue
+            params[f.name] = _Param(f.name, kind, default, [mname], docs.get(f.name))
+    return params
+
+
+def _add_param_flags(parser: argparse.ArgumentParser, params: dict[str, _Param]) -> None:
+    group = parser.add_argument_group(
+        "method parameters",
+        "Fields of the methods' parameter dataclasses; only the flags you give are changed.",
+    )
+    for p in params.values():
+        meaning = p.doc.meaning if p.doc else ""
+        sym = f" [{p.doc.symbol}]" if p.doc and p.doc.symbol else ""
+        owners = "" if len(p.owners) == len(METHODS) else f"; methods: {', '.join(p.owners)}"
+        text = f"{meaning}{sym} (default {p.default}{owners})".replace("%", "%%")
+        kwargs: dict[str, Any] = {"dest": _PARAM_PREFIX + p.name, "default": argparse.SUPPRESS,
+                                  "help": text}
+        if p.type is bool:
+            group.add_argument(p.flag, action=argparse.BooleanOptionalAction, **kwargs)
+        else:
+            group.add_argument(p.flag, type=p.type, metavar=p.type.__name__.upper(), **kwargs)
+
+
+def _given_params(args: argparse.Namespace) -> dict[str, Any]:
+    return {k[len(_PARAM_PREFIX):]: v for k, v in vars(args).items() if k.startswith(_PARAM_PREFIX)}
+
+
+def parameter_table(method: str, markdown: bool = False) -> str:
+    """Table of a method's parameters: name, CLI flag, paper symbol, default, meaning.
+
+    Parameters
+    ----------
+    method : str
+        A registered method name.
+    markdown : bool
+        Markdown table (as in the README) instead of aligned text.
+
+    Returns
+    -------
+    str
+    """
+    m = get_method(method)
+    docs = _field_docs(m.params)
+    defaults = m.params()
+    rows = []
+    for f in dataclasses.fields(m.params):
+        d = docs.get(f.name)
+        rows.append((f.name, d.symbol if d and d.symbol else "", repr(getattr(defaults, f.name)),
+                     d.meaning if d else ""))
+    if markdown:
+        lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]
+        for name, sym, default, meaning in rows:
+            flag = "--" + name.replace("_", "-")
+            meaning = meaning.replace("|", "\\|")
+            lines.append(f"| `{name}` (`{flag}`) | {sym or '—'} | `{default}` | {meaning} |")
+        return "\n".join(lines)
+    wn = max(len(r[0]) for r in rows)
+    ws = max(len(r[1]) for r in rows)
+    wd = max(len(r[2]) for r in rows)
+    return "\n".join(
+        f"  {n:<{wn}}  {s or '-':<{ws}}  {d:>{wd}}  {t}" for n, s, d, t in rows
+    )
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+class _Progress:
+    """A tqdm bar on stderr fed by ``callback(done, total)``; off with --quiet or no TTY."""
+
+    def __init__(self, desc: str, quiet: bool, unit: str = "warp") -> None:
+        from tqdm import tqdm
+
+        enabled = not quiet and sys.stderr.isatty()
+        self.bar = tqdm(total=None, desc=desc, unit=unit, file=sys.stderr, disable=not enabled,
+                        leave=False)
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar.total != total:
+            self.bar.total = total
+        self.bar.update(done - self.bar.n)
+
+    def __enter__(self) -> _Progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.bar.close()
+
+
+def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
+    """Fail before any work when an output cannot be written."""
+    p = Path(path)
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise ValueError(f"{what}: {p} must end in {' or '.join(suffixes)}")
+    if suffixes is None:
+        from PIL import Image
+
+        if p.suffix.lower() not in Image.registered_extensions():
+            raise ValueError(f"{what}: {p} has no known image extension (use .png)")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(2, f"{what}: directory does not exist", str(parent))
+    if p.is_dir():
+        raise IsADirectoryError(21, f"{what}: is a directory", str(p))
+    return p
+
+
+def _max_radius(value: float | None) -> float | None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--max-radius: must be positive, got {value}")
+    return value
+
+
+def _magnitude(flow: np.ndarray) -> np.ndarray:
+    mag = np.hypot(flow[..., 0], flow[..., 1])
+    return mag[np.isfinite(mag)]
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(np.asarray(image, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _split_list(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def _cmd_flow(args: argparse.Namespace) -> int:
+    import varflow
+    from varflow.io import read_image, write_flow, write_image
+    from varflow.viz import flow_to_color
+
+    method = get_method(args.method)
+    given = _given_params(args)
+    own = {f.name for f in dataclasses.fields(method.params)}
+    for name in given:
+        if name not in own:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} is not a parameter of method {method.name!r}")
+    params = make_params(method, **given)
+    max_radius = _max_radius(args.max_radius)
+    out = _check_output(args.output, (".flo", ".png"), "-o/--output")
+    png = _check_output(args.png, None, "--png") if args.png else None
+
+    f0 = read_image(args.frame0)
+    f1 = read_image(args.frame1)
+    log.info("frames: %s %s, %s %s", f0.shape, f0.dtype, f1.shape, f1.dtype)
+    log.info("parameters: %s", params)
+    t0 = time.perf_counter()
+    with _Progress(f"{method.name}", args.quiet) as progress:
+        flow = varflow.flow(f0, f1, method.name, params=params, callback=progress)
+    seconds = time.perf_counter() - t0
+    write_flow(out, flow)
+    if png is not None:
+        write_image(png, flow_to_color(flow, max_radius=max_radius))
+    mag = _magnitude(flow)
+    h, w = flow.shape[:2]
+    extra = f", colour {png}" if png is not None else ""
+    print(
+        f"{method.name}: {w}x{h} in {seconds:.2f} s, mean |w| {mag.mean():.3f} px, "
+        f"max |w| {mag.max():.3f} px -> {out}{extra}"
+    )
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from varflow.io import read_flow, write_image
+    from varflow.viz import flow_to_color, flow_to_color_with_legend
+
+    max_radius = _max_radius(args.max_radius)
+    out = _check_output(args.output, None, "-o/--output")
+    flow = read_flow(args.flow)
+    if args.legend:
+        img = flow_to_color_with_legend(flow, max_radius=max_radius)
+    else:
+        img = flow_to_color(flow, max_radius=max_radius)
+    write_image(out, img)
+    mag = _magnitude(flow)
+    h, w = flow.shape[:2]
+    peak = f"{mag.max():.3f}" if mag.size else "n/a"
+    print(f"{args.flow}: {w}x{h}, max |w| {peak} px -> {out}")
+    return 0
+
+
+_EVAL_LABELS = {  # key of evaluate() -> (label, unit)
+    "aee": ("AEE", "px"),
+    "aae": ("AAE", "deg"),
+    "rms": ("RMS", "px"),
+    "r1": ("R1", "% EPE > 1 px"),
+    "r3": ("R3", "% EPE > 3 px"),
+    "r5": ("R5", "% EPE > 5 px"),
+    "aee_noc": ("AEE noc", "px (non-occluded)"),
+    "aee_occ": ("AEE occ", "px (occluded)"),
+    "missing": ("missing", "% of valid pixels without estimate"),
+}
+
+
+def _read_mask(path: str) -> np.ndarray:
+    from varflow.io import read_image
+
+    m = read_image(path)
+    if m.ndim == 3:
+        m = m.max(axis=2)
+    return m > np.iinfo(m.dtype).max // 2
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from varflow.evaluation.metrics import evaluate
+    from varflow.io import read_flow
+
+    est = read_flow(args.est)
+    gt = read_flow(args.gt)
+    occ = _read_mask(args.occlusions) if args.occlusions else None
+    scores = evaluate(est, gt, occlusion=occ)
+    if args.json:
+        print(json.dumps({k: (None if isinstance(v, float) and math.isnan(v) else v)
+                          for k, v in scores.items()}, indent=2, sort_keys=False))
+        return 0
+    keys = [k for k in _EVAL_LABELS if k in scores] + [k for k in scores if k not in _EVAL_LABELS]
+    labels = {k: _EVAL_LABELS.get(k, (k, "")) for k in keys}
+    width = max(len(lab) for lab, _ in labels.values())
+    for k in keys:
+        label, unit = labels[k]
+        print(f"{label:<{width}}  {float(scores[k]):.6f}  {unit}".rstrip())
+    return 0
+
+
+DEMO_SHAPE = (240, 320)
+DEMO_MAGNITUDE = 3.0
+DEMO_SEED = 4
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    import varflow
+    from varflow.evaluation.metrics import evaluate
+    from varflow.evaluation.synthetic import synthetic_pair
+    from varflow.io import write_flo, write_image
+    from varflow.viz import flow_to_color_with_legend
+
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    f0, f1, gt = synthetic_pair("smooth", shape=DEMO_SHAPE, magnitude=DEMO_MAGNITUDE,
+                                seed=DEMO_SEED)
+    f0, f1 = _to_uint8(f0), _to_uint8(f1)  # exactly what frame0.png / frame1.png hold
+    t0 = time.perf_counter()
+    with _Progress("demo", args.quiet) as progress:
+        flow = varflow.flow(f0, f1, "tvl1", callback=progress)
+    seconds = time.perf_counter() - t0
+    scores = evaluate(flow, gt)
+    radius = float(_magnitude(gt).max())
+    paths = {
+        "frame0": out / "frame0.png",
+        "frame1": out / "frame1.png",
+        "flow": out / "flow.flo",
+        "colour": out / "flow.png",
+        "ground truth": out / "gt.flo",
+        "gt colour": out / "gt.png",
+    }
+    write_image(paths["frame0"], f0)
+    write_image(paths["frame1"], f1)
+    write_flo(paths["flow"], flow)
+    write_image(paths["colour"], flow_to_color_with_legend(flow, max_radius=radius))
+    write_flo(paths["ground truth"], gt)
+    write_image(paths["gt colour"], flow_to_color_with_legend(gt, max_radius=radius))
+    h, w = DEMO_SHAPE
+    print(f"synthetic smooth motion, {w}x{h}, up to {radius:.2f} px; tvl1 in {seconds:.2f} s")
+    print(f"AEE {scores['aee']:.4f} px, AAE {scores['aae']:.3f} deg (exact ground truth)")
+    for label, p in paths.items():
+        print(f"  {label + ':':<14}{p}")
+    print(f"next: varflow eval {paths['flow']} {paths['ground truth']}")
+    return 0
+
+
+def _cmd_methods(args: argparse.Namespace) -> int:
+    width = max(len(n) for n in METHODS)
+    for name, m in METHODS.items():
+        print(f"{name:<{width}}  {m.description}")
+        if args.params:
+            if args.markdown:
+                print()
+            print(parameter_table(name, markdown=args.markdown))
+            if args.markdown:
+                print()
+    return 0
+
+
+def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench import format_table, run_middlebury, write_csv
+    from varflow.evaluation.datasets import data_root
+
+    methods = _split_list(args.methods)
+    if not methods:
+        raise ValueError("--methods: give at least one method name")
+    for m in methods:
+        get_method(m)
+    sequences = None
+    if args.sequences:
+        sequences = [s for item in args.sequences for s in _split_list(item)]
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    rows = run_middlebury(methods, root=root, sequences=sequences,
+                          overrides=_given_params(args), progress=not args.quiet)
+    print(f"Middlebury frame10 -> frame11, data {root}; seconds exclude JIT warm-up")
+    print(format_table(rows))
+    if csv_path is not None:
+        write_csv(rows, csv_path)
+        print(f"wrote {csv_path}")
+    return 0
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (parameter flags generated from the registry)."""
+    params = _collect_params()
+    common = _Parser(add_help=False)
+    common.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                        help="log to stderr: -v INFO, -vv DEBUG")
+
+    parser = _Parser(
+        prog=PROG,
+        description="Classical variational optical flow (TV-L1 and friends).",
+        epilog="Run 'varflow demo' for a first look; 'varflow COMMAND --help' for details.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log to stderr: -v INFO, -vv DEBUG")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
+                                parser_class=_Parser)
+
+    p = sub.add_parser("flow", parents=[common], help="estimate the flow between two frames",
+                       description="Estimate the flow from FRAME0 to FRAME1.")
+    p.add_argument("frame0", metavar="FRAME0", help="first image (PNG, JPEG, ...)")
+    p.add_argument("frame1", metavar="FRAME1", help="second image, same size")
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="flow file: .flo (Middlebury) or .png (KITTI 16-bit)")
+    p.add_argument("--png", metavar="COLOUR.png", help="also write the colour-coded flow")
+    p.add_argument("--method", default="tvl1", metavar="NAME",
+                   help=f"one of: {', '.join(METHODS)} (default tvl1)")
+    p.add_argument("--max-radius", type=float, metavar="R",
+                   help="flow magnitude of full colour saturation (default: the maximum)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(p, params)
+    p.set_defaults(func=_cmd_flow)
+
+    p = sub.add_parser("show", parents=[common], help="colour-code a flow file",
+                       description="Write the Middlebury colour coding of a .flo/.png flow.")
+    p.add_argument("flow", metavar="FLOW", help=".flo or KITTI .png flow file")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.png")
+    p.add_argument("--max-radius", type=float, metavar="R",
+                   help="flow magnitude of full colour saturation (default: the maximum)")
+    p.add_argument("--legend", action="store_true", help="paste a colour-wheel legend")
+    p.set_defaults(func=_cmd_show)
+
+    p = sub.add_parser("eval", parents=[common], help="score a flow against ground truth",
+                       description="Print AEE, AAE (degrees), RMS and R1/R3/R5 of EST vs GT.")
+    p.add_argument("est", metavar="EST", help="estimated flow (.flo or .png)")
+    p.add_argument("gt", metavar="GT", help="ground-truth flow (.flo or .png)")
+    p.add_argument("--occlusions", metavar="MASK.png",
+                   help="occlusion mask (white = occluded) for noc/occ scores")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("demo", parents=[common], help="run on a synthetic pair with known motion",
+                       description="Synthetic pair with exact ground truth: writes frames, "
+                       "flow and colour images, prints the error.")
+    p.add_argument("-o", "--output", default="varflow-demo", metavar="DIR",
+                   help="output folder (default ./varflow-demo)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("methods", parents=[common], help="list the methods",
+                       description="List the registered methods.")
+    p.add_argument("-p", "--params", action="store_true", help="with their parameters")
+    p.add_argument("--markdown", action="store_true", help="parameter tables in Markdown")
+    p.set_defaults(func=_cmd_methods)
+
+    p = sub.add_parser("bench", help="accuracy benchmarks", description="Accuracy benchmarks.")
+    bsub = p.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True,
+                            parser_class=_Parser)
+    b = bsub.add_parser("middlebury", parents=[common],
+                        help="the 8 Middlebury sequences with public ground truth",
+                        description="AEE/AAE/time per sequence and method (book Table 3.3 "
+                        "layout).")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    b.add_argument("--methods", default="tvl1", metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(METHODS)} (default tvl1)")
+    b.add_argument("--sequences", nargs="+", metavar="SEQ",
+                   help="subset of the sequences (names, space or comma separated)")
+    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(b, params)
+    b.set_defaults(func=_cmd_bench_middlebury)
+    return parser
+
+
+# --------------------------------------------------------------------------- main
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        msg = f"{exc.strerror}: {exc.filename}"
+        if exc.filename2 is not None:
+            msg += f" -> {exc.filename2}"
+    else:
+        msg = str(exc) or type(exc).__name__
+    if not isinstance(exc, ValueError | OSError | _UsageError):
+        msg = f"{type(exc).__name__}: {msg}"
+    return " ".join(msg.split())
+
+
+def _fail(message: str) -> int:
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; ``sys.argv[1:]`` by default.
+
+    Returns
+    -------
+    int
+        0 on success, 2 on any error (one line on stderr), 130 on Ctrl-C, 141 when
+        stdout is a closed pipe.
+    """
+    handler: logging.Handler | None = None
+    pkg_log = logging.getLogger("varflow")
+    old_level = pkg_log.level
+    try:
+        try:
+            args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+        except SystemExit as exc:  # --help, --version
+            return int(exc.code or 0) if not isinstance(exc.code, str) else _fail(exc.code)
+        if getattr(args, "verbose", 0):
+            handler = logging.StreamHandler(sys.stderr)
+            handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+            pkg_log.addHandler(handler)
+            pkg_log.setLevel(logging.INFO if args.verbose == 1 else logging.DEBUG)
+        func: Callable[[argparse.Namespace], int] = args.func
+        return func(args)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # e.g. `varflow methods | head -1`: stop quietly
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes
+        except (OSError, ValueError):
+            pass
+        return 141
+    except Exception as exc:  # noqa: BLE001 - the CLI turns every error into one line
+        if handler is not None:
+            log.info("details", exc_info=exc)
+        return _fail(_one_line(exc))
+    finally:
+        if handler is not None:
+            pkg_log.removeHandler(handler)
+            pkg_log.setLevel(old_level)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
