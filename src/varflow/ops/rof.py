@@ -56,46 +56,71 @@ def rof_denoise_numpy(f: np.ndarray, theta: float, n_iter: int) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def _rof_kernel(f, theta, sched, u, ubar, p):
-    h, w, k = f.shape
+_F1 = np.float32(1.0)
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def _rof_kernel(f, theta, sched, u, ubar, px, py):
+    """Chambolle-Pock iterations on planar ``(C, H, W)`` arrays, in place.
+
+    Rows are processed through 1-D views with plain loop indices so that the
+    loops vectorise; the divergence treats the last column/row as in
+    :func:`varflow.ops.differences.divergence` (``px[:, -1]`` and ``py[-1]`` are
+    kept at zero, so a uniform backward difference is exact).
+    """
+    k, h, w = f.shape
     for it in range(sched.shape[0]):
         tau = sched[it, 0]
         sigma = sched[it, 1]
         rel = sched[it, 2]
-        for i in nb.prange(h):
-            for j in range(w):
-                for c in range(k):
-                    gx = ubar[i, j + 1, c] - ubar[i, j, c] if j < w - 1 else 0.0
-                    gy = ubar[i + 1, j, c] - ubar[i, j, c] if i < h - 1 else 0.0
-                    px = p[i, j, c, 0] + sigma * gx
-                    py = p[i, j, c, 1] + sigma * gy
-                    nrm = math.sqrt(px * px + py * py)
-                    if nrm > 1.0:
-                        px /= nrm
-                        py /= nrm
-                    p[i, j, c, 0] = px
-                    p[i, j, c, 1] = py
         a = tau / theta
-        for i in nb.prange(h):
-            for j in range(w):
-                for c in range(k):
-                    if j == 0:
-                        d = p[i, j, c, 0]
-                    elif j == w - 1:
-                        d = -p[i, j - 1, c, 0]
-                    else:
-                        d = p[i, j, c, 0] - p[i, j - 1, c, 0]
-                    if i == 0:
-                        d += p[i, j, c, 1]
-                    elif i == h - 1:
-                        d -= p[i - 1, j, c, 1]
-                    else:
-                        d += p[i, j, c, 1] - p[i - 1, j, c, 1]
-                    uo = u[i, j, c]
-                    un = (uo + tau * d + a * f[i, j, c]) / (1.0 + a)
-                    u[i, j, c] = un
-                    ubar[i, j, c] = un + rel * (un - uo)
+        inv = _F1 / (_F1 + a)
+        for r in nb.prange(k * h):
+            c = r // h
+            i = r - c * h
+            ub = ubar[c, i]
+            ubn = ubar[c, min(i + 1, h - 1)]
+            cy = sigma if i < h - 1 else np.float32(0.0)
+            pxr = px[c, i]
+            pyr = py[c, i]
+            ub1 = ub[1:]
+            for j in range(w - 1):
+                qx = pxr[j] + sigma * (ub1[j] - ub[j])
+                qy = pyr[j] + cy * (ubn[j] - ub[j])
+                s = _F1 / max(_F1, math.sqrt(qx * qx + qy * qy))
+                pxr[j] = qx * s
+                pyr[j] = qy * s
+            qy = pyr[w - 1] + cy * (ubn[w - 1] - ub[w - 1])
+            pyr[w - 1] = qy / max(_F1, abs(qy))
+        for r in nb.prange(k * h):
+            c = r // h
+            i = r - c * h
+            pxr = px[c, i]
+            pyc = py[c, i]
+            pym = py[c, max(i - 1, 0)]
+            cm = _F1 if i > 0 else np.float32(0.0)
+            ur = u[c, i]
+            ubr = ubar[c, i]
+            fr = f[c, i]
+            # j = 0: no left neighbour
+            d = pxr[0] + pyc[0] - cm * pym[0]
+            uo = ur[0]
+            un = (uo + tau * d + a * fr[0]) * inv
+            ur[0] = un
+            ubr[0] = un + rel * (un - uo)
+            pxl = pxr[: w - 1]
+            pxc = pxr[1:]
+            pyc1 = pyc[1:]
+            pym1 = pym[1:]
+            ur1 = ur[1:]
+            ubr1 = ubr[1:]
+            fr1 = fr[1:]
+            for jj in range(w - 1):
+                d = pxc[jj] - pxl[jj] + pyc1[jj] - cm * pym1[jj]
+                uo = ur1[jj]
+                un = (uo + tau * d + a * fr1[jj]) * inv
+                ur1[jj] = un
+                ubr1[jj] = un + rel * (un - uo)
 
 
 def rof_denoise(f: np.ndarray, theta: float = 0.125, n_iter: int = 50) -> np.ndarray:
@@ -116,12 +141,13 @@ def rof_denoise(f: np.ndarray, theta: float = 0.125, n_iter: int = 50) -> np.nda
     """
     if theta <= 0:
         raise ValueError(f"rof theta must be > 0, got {theta}")
-    f = np.ascontiguousarray(f, dtype=np.float32)
-    u = f.copy()
-    ubar = f.copy()
-    p = np.zeros(f.shape + (2,), np.float32)
-    _rof_kernel(f, np.float32(theta), _schedule(n_iter, theta), u, ubar, p)
-    return u
+    fp = np.ascontiguousarray(np.moveaxis(np.asarray(f, np.float32), -1, 0))
+    u = fp.copy()
+    ubar = fp.copy()
+    px = np.zeros_like(fp)
+    py = np.zeros_like(fp)
+    _rof_kernel(fp, np.float32(theta), _schedule(n_iter, theta), u, ubar, px, py)
+    return np.ascontiguousarray(np.moveaxis(u, 0, -1))
 
 
 def structure_texture(

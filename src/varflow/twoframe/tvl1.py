@@ -118,128 +118,337 @@ def edge_weight(image: np.ndarray, c: float, g_min: float = 0.05) -> np.ndarray:
     return np.maximum(np.exp(-c * mag2), g_min).astype(np.float32)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def tvl1_iterations(ix, iy, a, g, u, p, q, lam, theta, tau, max_iter, tol, n_sweeps):
-    """Numba TV-L1 iterations at one warp; updates ``u``, ``p``, ``q`` in place.
+# float32 constants: Python float literals would make Numba compute in float64
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+_EPS_GRAD = np.float32(1e-12)
 
-    Channels whose gradient vanishes (``|∇I1w_c|² < 1e-12``) take no part in the
-    data prox.
+
+def _row_blocks(h: int) -> np.ndarray:
+    """Split ``h`` rows into contiguous blocks, a few per thread (bounds, length n+1)."""
+    n = max(1, min(h // 4, 4 * nb.get_num_threads()))
+    return np.linspace(0, h, n + 1).astype(np.int64)
+
+
+# The row kernels below index 1-D row views with plain loop variables only (no
+# ``j - 1``): Numba then knows every index is non-negative, drops its wrap-around
+# checks and LLVM vectorises the loops.
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
+    """Prox of the linearised colour L1 term for row ``i`` (in place on d1, d2, q).
+
+    Dual coordinate descent over the channels (see :func:`varflow.ops.prox.prox_linear_l1`);
+    on entry ``d = u``; on exit ``d = u - t Σ_c q_c ∇I_c``.
+    """
+    nc = a.shape[0]
+    w = a.shape[2]
+    for c in range(nc):
+        gxr = ix[c, i]
+        gyr = iy[c, i]
+        qr = q[c, i]
+        for j in range(w):
+            qv = t * qr[j]
+            d1[j] -= qv * gxr[j]
+            d2[j] -= qv * gyr[j]
+    for _s in range(n_sweeps):
+        for c in range(nc):
+            gxr = ix[c, i]
+            gyr = iy[c, i]
+            ar = a[c, i]
+            qr = q[c, i]
+            for j in range(w):
+                gx = gxr[j]
+                gy = gyr[j]
+                qo = t * qr[j]
+                e1 = d1[j] + qo * gx
+                e2 = d2[j] + qo * gy
+                nn = gx * gx + gy * gy
+                r = ar[j] + gx * e1 + gy * e2
+                qn = r / (t * nn) if nn >= _EPS_GRAD else _F0
+                qn = min(max(qn, -_F1), _F1)
+                qr[j] = qn
+                d1[j] = e1 - t * qn * gx
+                d2[j] = e2 - t * qn * gy
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _primal_row(u, tp, i, k, d, theta):
+    """``u_k[i] = d + θ div(tp_k)[i]``; returns the squared change of the row.
+
+    The divergence is the negative adjoint of the forward-difference gradient with
+    Neumann boundary (:func:`varflow.ops.differences.divergence`): it ignores the x
+    component in the last column and the y component in the last row.
+    """
+    h = u.shape[1]
+    w = u.shape[2]
+    px = tp[2 * k, i]
+    pyc = tp[2 * k + 1, i]
+    pym = tp[2 * k + 1, max(i - 1, 0)]
+    cy = _F1 if i < h - 1 else _F0  # weight of py[i]
+    cm = _F1 if i > 0 else _F0  # weight of py[i - 1]
+    ur = u[k, i]
+    err = _F0
+    # dv_x = px[j] - px[j-1] with px[-1] := 0 and px[w-1] := 0
+    dv = px[0] + cy * pyc[0] - cm * pym[0]
+    new = d[0] + theta * dv
+    err += (new - ur[0]) ** 2
+    ur[0] = new
+    pxl = px[: w - 2]  # px[j - 1] for j = 1 .. w-2
+    pxc = px[1 : w - 1]
+    pyc1 = pyc[1 : w - 1]
+    pym1 = pym[1 : w - 1]
+    d1 = d[1 : w - 1]
+    ur1 = ur[1 : w - 1]
+    for jj in range(w - 2):
+        dv = pxc[jj] - pxl[jj] + cy * pyc1[jj] - cm * pym1[jj]
+        new = d1[jj] + theta * dv
+        err += (new - ur1[jj]) ** 2
+        ur1[jj] = new
+    dv = -px[w - 2] + cy * pyc[w - 1] - cm * pym[w - 1]
+    new = d[w - 1] + theta * dv
+    err += (new - ur[w - 1]) ** 2
+    ur[w - 1] = new
+    return err
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _project(px, py, lim):
+    nrm = math.sqrt(px * px + py * py)
+    s = lim / max(nrm, lim)
+    return px * s, py * s
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _dual_row(u, p, tp, g, tens, i, step, aniso):
+    """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``."""
+    h = u.shape[1]
+    w = u.shape[2]
+    cy = step if i < h - 1 else _F0
+    ip = min(i + 1, h - 1)
+    gr = g[i]
+    for k in range(2):
+        uc = u[k, i]
+        un = u[k, ip]
+        ucr = uc[1:]  # u[j + 1]; the last column has a zero x difference
+        pxr = p[2 * k, i]
+        pyr = p[2 * k + 1, i]
+        if not aniso:
+            for j in range(w - 1):
+                px, py = _project(pxr[j] + step * (ucr[j] - uc[j]),
+                                  pyr[j] + cy * (un[j] - uc[j]), gr[j])
+                pxr[j] = px
+                pyr[j] = py
+            j = w - 1
+            px, py = _project(pxr[j], pyr[j] + cy * (un[j] - uc[j]), gr[j])
+            pxr[j] = px
+            pyr[j] = py
+        else:
+            t11r = tens[0, i]
+            t12r = tens[1, i]
+            t22r = tens[2, i]
+            tpxr = tp[2 * k, i]
+            tpyr = tp[2 * k + 1, i]
+            for j in range(w):
+                gx = step * (ucr[j] - uc[j]) if j < w - 1 else _F0
+                gy = cy * (un[j] - uc[j])
+                t11 = t11r[j]
+                t12 = t12r[j]
+                t22 = t22r[j]
+                px, py = _project(pxr[j] + t11 * gx + t12 * gy,
+                                  pyr[j] + t12 * gx + t22 * gy, gr[j])
+                pxr[j] = px
+                pyr[j] = py
+                tpxr[j] = t11 * px + t12 * py
+                tpyr[j] = t12 * px + t22 * py
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def tvl1_iterations(
+    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks
+):
+    """Numba TV-L1 iterations at one warp; updates ``u``, ``p``, ``tp``, ``q`` in place.
+
+    One pass per iteration: rows are split into contiguous blocks (one task
+    each); inside a block the primal update of row ``i`` is followed by the dual
+    update of row ``i - 1`` (which needs the new ``u`` of rows ``i - 1`` and
+    ``i``), so the flow and the dual variables are touched while in cache.  The
+    last row of each block waits for a second, short pass.  The result equals the
+    classic two-pass (Jacobi) scheme exactly: every primal update sees the dual
+    variables of the previous iteration.
 
     Parameters
     ----------
-    ix, iy : (H, W, C) float32
-        Derivatives of the warped second frame (zero where the data term is off).
-    a : (H, W, C) float32
+    ix, iy : (C, H, W) float32
+        Derivatives of the warped second frame, planar (zero where the data term is off).
+    a : (C, H, W) float32
         Residual at zero flow, ``I1w - I0 - ix*u0_1 - iy*u0_2`` (zero where off).
     g : (H, W) float32
-        TV edge weight.
-    u : (H, W, 2) float32
-        Flow, updated in place.
-    p : (H, W, 2, 2) float32
-        Dual TV variable per flow component, ``p[..., k, :]`` for component k.
-    q : (H, W, C) float32
+        Radius of the dual ball (TV edge weight g(x)).
+    tens : (3, H, W) float32
+        Symmetric tensor ``T = D^{1/2}`` as (T11, T12, T22); read only if ``aniso``.
+    u : (2, H, W) float32
+        Flow (u1, u2), planar, updated in place.
+    p : (4, H, W) float32
+        Dual TV variables (p1x, p1y, p2x, p2y).
+    tp : (4, H, W) float32
+        ``T p``; pass ``p`` itself when not ``aniso``.
+    q : (C, H, W) float32
         Dual variable of the data prox (warm start).
+    lam, theta, tau, tol : float
+        λ, θ, τ, ε.
+    max_iter, n_sweeps : int
+    aniso : bool
+        Use the tensor (tensor-directed TV ``Σ |T ∇u_k|``).
+    blocks : (n+1,) int64
+        Row-block bounds from :func:`_row_blocks`.
 
     Returns
     -------
     int
         Iterations performed.
     """
-    h, w, nc = a.shape
+    nc, h, w = a.shape
     t = lam * theta
     step = tau / theta
-    errs = np.zeros(h, np.float64)
     tol2 = tol * tol
-    inv = np.empty_like(a)  # 1 / (t |g_c|^2), 0 where the gradient vanishes
-    for i in nb.prange(h):
-        for j in range(w):
-            for c in range(nc):
-                nn = ix[i, j, c] * ix[i, j, c] + iy[i, j, c] * iy[i, j, c]
-                inv[i, j, c] = 1.0 / (t * nn) if nn >= 1e-12 else 0.0
+    n_blk = blocks.shape[0] - 1
+    errs = np.zeros(n_blk, np.float64)
+    buf = np.empty((n_blk, 2, w), np.float32)
     it = 0
     while it < max_iter:
         it += 1
-        for i in nb.prange(h):
+        for b in nb.prange(n_blk):
+            r0 = blocks[b]
+            r1 = blocks[b + 1]
+            d1 = buf[b, 0]
+            d2 = buf[b, 1]
             err = 0.0
-            for j in range(w):
-                u1 = u[i, j, 0]
-                u2 = u[i, j, 1]
-                d1 = u1
-                d2 = u2
-                for c in range(nc):
-                    d1 -= t * q[i, j, c] * ix[i, j, c]
-                    d2 -= t * q[i, j, c] * iy[i, j, c]
-                for _s in range(n_sweeps):
-                    for c in range(nc):
-                        gx = ix[i, j, c]
-                        gy = iy[i, j, c]
-                        qo = q[i, j, c]
-                        e1 = d1 + t * qo * gx
-                        e2 = d2 + t * qo * gy
-                        qn = (a[i, j, c] + gx * e1 + gy * e2) * inv[i, j, c]
-                        qn = min(max(qn, -1.0), 1.0)
-                        q[i, j, c] = qn
-                        d1 = e1 - t * qn * gx
-                        d2 = e2 - t * qn * gy
-                for k in range(2):
-                    if j == 0:
-                        dv = p[i, j, k, 0]
-                    elif j == w - 1:
-                        dv = -p[i, j - 1, k, 0]
-                    else:
-                        dv = p[i, j, k, 0] - p[i, j - 1, k, 0]
-                    if i == 0:
-                        dv += p[i, j, k, 1]
-                    elif i == h - 1:
-                        dv -= p[i - 1, j, k, 1]
-                    else:
-                        dv += p[i, j, k, 1] - p[i - 1, j, k, 1]
-                    if k == 0:
-                        n1 = d1 + theta * dv
-                        err += (n1 - u1) * (n1 - u1)
-                        u[i, j, 0] = n1
-                    else:
-                        n2 = d2 + theta * dv
-                        err += (n2 - u2) * (n2 - u2)
-                        u[i, j, 1] = n2
-            errs[i] = err
-        for i in nb.prange(h):
-            for j in range(w):
-                lim = g[i, j]
-                for k in range(2):
-                    gx = u[i, j + 1, k] - u[i, j, k] if j < w - 1 else 0.0
-                    gy = u[i + 1, j, k] - u[i, j, k] if i < h - 1 else 0.0
-                    px = p[i, j, k, 0] + step * gx
-                    py = p[i, j, k, 1] + step * gy
-                    nrm = math.sqrt(px * px + py * py)
-                    if nrm > lim:
-                        s = lim / nrm
-                        px *= s
-                        py *= s
-                    p[i, j, k, 0] = px
-                    p[i, j, k, 1] = py
+            for i in range(r0, r1):
+                for j in range(w):
+                    d1[j] = u[0, i, j]
+                    d2[j] = u[1, i, j]
+                _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
+                err += _primal_row(u, tp, i, 0, d1, theta)
+                err += _primal_row(u, tp, i, 1, d2, theta)
+                if i > r0:
+                    _dual_row(u, p, tp, g, tens, i - 1, step, aniso)
+            errs[b] = err
+        for b in nb.prange(n_blk):
+            _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso)
         if errs.sum() / (h * w) < tol2:
             break
     return it
 
 
-def tvl1_iterations_numpy(ix, iy, a, g, u, p, q, lam, theta, tau, max_iter, tol, n_sweeps):
-    """NumPy reference of :func:`tvl1_iterations` (same arguments, same in-place updates)."""
-    h, w, _ = a.shape
+def tvl1_iterations_numpy(
+    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks=None
+):
+    """NumPy reference of :func:`tvl1_iterations` (same arguments and in-place updates).
+
+    Written with the operators of :mod:`varflow.ops` on ``(H, W, ...)`` views.
+    """
+    _, h, w = a.shape
     t = lam * theta
+    hw = lambda x: np.moveaxis(x, 0, -1)  # noqa: E731 - planar -> channels last view
+    T = None
+    if aniso:
+        T = np.stack([np.stack([tens[0], tens[1]], -1), np.stack([tens[1], tens[2]], -1)], -2)
     it = 0
     while it < max_iter:
         it += 1
-        d, qn = prox_linear_l1(u, a, ix, iy, t, n_sweeps=n_sweeps, q0=q)
-        q[...] = qn
-        new = np.stack([d[..., k] + theta * divergence(p[..., k, :]) for k in range(2)], -1)
+        d, qn = prox_linear_l1(hw(u), hw(a), hw(ix), hw(iy), t, n_sweeps=n_sweeps, q0=hw(q))
+        q[...] = np.moveaxis(qn, -1, 0)
+        new = np.stack([d[..., k] + theta * divergence(hw(tp[2 * k : 2 * k + 2])) for k in (0, 1)])
         err = float(((new - u) ** 2).sum()) / (h * w)
         u[...] = new
-        for k in range(2):
-            p[..., k, :] = project_l2_ball(p[..., k, :] + (tau / theta) * gradient(u[..., k]), g)
+        for k in (0, 1):
+            grad = gradient(u[k])
+            if aniso:
+                grad = np.einsum("hwab,hwb->hwa", T, grad)
+            pk = project_l2_ball(hw(p[2 * k : 2 * k + 2]) + (tau / theta) * grad, g)
+            p[2 * k : 2 * k + 2] = np.moveaxis(pk, -1, 0)
+            if aniso:
+                tp[2 * k : 2 * k + 2] = np.moveaxis(np.einsum("hwab,hwb->hwa", T, pk), -1, 0)
         if err < tol * tol:
             break
     return it
+
+
+def init_level_state(
+    state: dict, shape: tuple[int, int, int], g: np.ndarray, tensor: np.ndarray | None = None
+) -> None:
+    """Set up the per-level state of the primal-dual iterations (first warp of a level).
+
+    The TV dual variables are warm started from the coarser level (bilinear
+    resampling, then projection onto the new ball of radius ``g``).
+
+    Parameters
+    ----------
+    state : dict
+        The driver's per-level dict; gains ``g``, ``tensor``, ``p``, ``tp`` and ``q``.
+    shape : (H, W, C)
+    g : ndarray, shape (H, W), float32
+        Radius of the dual ball (edge weight).
+    tensor : ndarray, shape (3, H, W), float32, optional
+        ``T = D^{1/2}`` as (T11, T12, T22) for tensor-directed TV; ``None`` for
+        isotropic TV.
+    """
+    h, w, nc = shape
+    state["g"] = np.ascontiguousarray(g, dtype=np.float32)
+    state["tensor"] = None if tensor is None else np.ascontiguousarray(tensor, dtype=np.float32)
+    prev = state.get("previous") or {}
+    if "p" in prev:
+        p = resize_bilinear(np.moveaxis(prev["p"], 0, -1), (h, w)).reshape(h, w, 2, 2)
+        p = project_l2_ball(p, state["g"][..., None]).reshape(h, w, 4)
+        p = np.ascontiguousarray(np.moveaxis(p, -1, 0), dtype=np.float32)
+    else:
+        p = np.zeros((4, h, w), np.float32)
+    state["p"] = p
+    if tensor is None:
+        state["tp"] = p
+    else:
+        t11, t12, t22 = state["tensor"]
+        tp = np.empty_like(p)
+        for k in (0, 2):
+            tp[k] = t11 * p[k] + t12 * p[k + 1]
+            tp[k + 1] = t12 * p[k] + t22 * p[k + 1]
+        state["tp"] = tp
+    state["q"] = np.zeros((nc, h, w), np.float32)
+
+
+def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict,
+             engine: str = "numba") -> np.ndarray:
+    """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
+
+    Shared by every TV-L1 flavour (isotropic, edge-weighted, tensor-directed): they
+    differ only in ``state["g"]`` and ``state["tensor"]``.  Arguments as in
+    :func:`solve_warp`.
+    """
+    if engine not in ("numba", "numpy"):
+        raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
+    m = inside[..., None].astype(np.float32)
+    ixh = I1w_dx * m
+    iyh = I1w_dy * m
+    ah = (I1w - I0 - ixh * flow0[..., :1] - iyh * flow0[..., 1:2]) * m
+    planar = lambda x: np.ascontiguousarray(np.moveaxis(x, -1, 0), dtype=np.float32)  # noqa: E731
+    ix, iy, a, u = planar(ixh), planar(iyh), planar(ah), planar(flow0)
+    tens = state["tensor"]
+    aniso = tens is not None
+    if not aniso:
+        tens = np.zeros((3, 1, 1), np.float32)
+    args = (
+        ix, iy, a, state["g"], tens, u, state["p"], state["tp"], state["q"],
+        np.float32(params.data_weight), np.float32(params.coupling), np.float32(params.tv_step),
+        params.max_iterations, np.float32(params.tolerance), params.data_sweeps, aniso,
+    )
+    if engine == "numba":
+        n = tvl1_iterations(*args, _row_blocks(I0.shape[0]))
+    else:
+        n = tvl1_iterations_numpy(*args)
+    state["iterations"] = state.get("iterations", 0) + n
+    return np.ascontiguousarray(np.moveaxis(u, 0, -1))
 
 
 def solve_warp(
@@ -265,41 +474,10 @@ def solve_warp(
     -------
     ndarray, shape (H, W, 2), float32
     """
-    h, w, nc = I0.shape
     if "g" not in state:
-        state["g"] = edge_weight(I0, params.edge_weight, params.edge_weight_min)
-        prev = state.get("previous") or {}
-        if "p" in prev:  # warm start the TV dual from the coarser level
-            p = resize_bilinear(prev["p"].reshape(prev["p"].shape[:2] + (4,)), (h, w))
-            p = project_l2_ball(p.reshape(h, w, 2, 2), state["g"][..., None])
-            state["p"] = np.ascontiguousarray(p, dtype=np.float32)
-        else:
-            state["p"] = np.zeros((h, w, 2, 2), np.float32)
-        state["q"] = np.zeros((h, w, nc), np.float32)
-    m = inside[..., None].astype(np.float32)
-    ix = np.ascontiguousarray(I1w_dx * m, dtype=np.float32)
-    iy = np.ascontiguousarray(I1w_dy * m, dtype=np.float32)
-    a = (I1w - I0 - ix * flow0[..., :1] - iy * flow0[..., 1:2]) * m
-    a = np.ascontiguousarray(a, dtype=np.float32)
-    u = np.array(flow0, dtype=np.float32, order="C")
-    fn = tvl1_iterations if engine == "numba" else tvl1_iterations_numpy
-    n = fn(
-        ix,
-        iy,
-        a,
-        state["g"],
-        u,
-        state["p"],
-        state["q"],
-        np.float32(params.data_weight),
-        np.float32(params.coupling),
-        np.float32(params.tv_step),
-        params.max_iterations,
-        np.float32(params.tolerance),
-        params.data_sweeps,
-    )
-    state["iterations"] = state.get("iterations", 0) + n
-    return u
+        g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
+        init_level_state(state, I0.shape, g)
+    return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
 
 
 def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callback=None):
