@@ -20,18 +20,36 @@ from varflow import cli
 from varflow.evaluation import bench, datasets
 from varflow.evaluation.metrics import evaluate
 
-# Default tvl1 on the colour frames.  Measured: RubberWhale 0.10, Venus ~0.29;
-# the book's TV-only figures are 0.1118 and 0.2977.
-AEE_LIMITS = {"RubberWhale": 0.115, "Venus": 0.32}
+# Default tvl1 on the colour frames, all 8 pairs: the foundation's acceptance
+# figures.  Measured (2026-11-23): mean 0.284, worst ratio to the book's TV-only
+# figure 1.04 (Hydrangea); the bounds are the issue's: mean <= 0.30 and no pair
+# above 1.05 x the book (Gibson & Marques 2016, Table 3.3).
+MEAN_AEE_LIMIT = 0.30
+BOOK_RATIO_LIMIT = 1.05
+
+
+@pytest.fixture(scope="module")
+def tvl1_middlebury_aee(data_root: Path) -> dict[str, float]:
+    out = {}
+    for seq in datasets.MIDDLEBURY_SEQUENCES:
+        f0, f1, gt = datasets.load_middlebury_pair(seq, data_root)
+        out[seq] = evaluate(varflow.flow(f0, f1, "tvl1"), gt)["aee"]
+    return out
 
 
 @pytest.mark.data
-@pytest.mark.parametrize("seq", sorted(AEE_LIMITS))
-def test_tvl1_default_accuracy(data_root: Path, seq: str) -> None:
-    f0, f1, gt = datasets.load_middlebury_pair(seq, data_root)
-    est = varflow.flow(f0, f1, "tvl1")
-    aee = evaluate(est, gt)["aee"]
-    assert aee <= AEE_LIMITS[seq], f"{seq}: AEE {aee:.4f} > {AEE_LIMITS[seq]}"
+@pytest.mark.parametrize("seq", datasets.MIDDLEBURY_SEQUENCES)
+def test_tvl1_default_accuracy_per_sequence(tvl1_middlebury_aee: dict[str, float],
+                                            seq: str) -> None:
+    aee = tvl1_middlebury_aee[seq]
+    limit = BOOK_RATIO_LIMIT * datasets.BOOK_TV_AEE[seq]
+    assert aee <= limit, f"{seq}: AEE {aee:.4f} > {limit:.4f} (1.05 x book TV-only)"
+
+
+@pytest.mark.data
+def test_tvl1_default_mean_accuracy(tvl1_middlebury_aee: dict[str, float]) -> None:
+    mean = float(np.mean(list(tvl1_middlebury_aee.values())))
+    assert mean <= MEAN_AEE_LIMIT, f"mean AEE {mean:.4f} > {MEAN_AEE_LIMIT}"
 
 
 # ----------------------------------------------------------------------------- loaders

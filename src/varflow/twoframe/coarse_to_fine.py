@@ -66,7 +66,9 @@ class CoarseToFineParams:
     structure_texture : bool
         Run on the texture part ``I - α ROF(I)`` (Wedel et al. 2009).  Default True.
     texture_alpha : float
-        α of the structure-texture blend, in [0, 1].  Default 0.95.
+        α of the structure-texture blend ``I - α ROF(I)``, in [0, 1].  Default 0.65,
+        tuned on the 8 Middlebury pairs (Wedel et al. use 0.95, which keeps less of
+        the structure: mean AEE 0.320 there against 0.284 with 0.65).
     rof_theta : float
         θ of the ROF model used for the structure part (intensity units, images in
         [0, 1]).  Default 0.125.
@@ -83,7 +85,7 @@ class CoarseToFineParams:
     n_warps: int = 5
     median_size: int = 5
     structure_texture: bool = True
-    texture_alpha: float = 0.95
+    texture_alpha: float = 0.65
     rof_theta: float = 0.125
     rof_iterations: int = 50
     pyramid_sigma: float = 0.6
