@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .twoframe import tensor as _tensor
 from .twoframe import tvl1 as _tvl1
 from .twoframe.coarse_to_fine import CoarseToFineParams, WarpSolver
 
@@ -43,6 +44,12 @@ METHODS: dict[str, Method] = {
         params=_tvl1.TVL1Params,
         solve_warp=_tvl1.solve_warp,
         description="TV-L1 (colour L1 data term, edge-weighted TV, ROF texture, median)",
+    ),
+    "tensor": Method(
+        name="tensor",
+        params=_tensor.TensorParams,
+        solve_warp=_tensor.solve_warp,
+        description="tensor-directed TV-L1 (anisotropic TV following image structure)",
     ),
 }
 

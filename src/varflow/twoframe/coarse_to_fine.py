@@ -11,7 +11,8 @@ each warp, and the upsampling of the flow between levels.  A method plugs in a
 that minimises its energy linearised around ``flow0`` at one pyramid level;
 ``state`` is a dict that lives for one level (dual variables, edge weights…);
 ``state["previous"]`` holds the state of the coarser level, so a solver can warm
-start its dual variables across levels.
+start its dual variables across levels, and ``state["warp"]`` is the index of the
+current warp at this level (``params.level_warps(shape)`` warps per level).
 """
 
 from __future__ import annotations
@@ -119,6 +120,15 @@ class CoarseToFineParams:
         """Return a copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
+    def level_warps(self, shape: tuple[int, int]) -> int:
+        """Number of warps at a pyramid level of size ``shape`` (``n_warps`` here).
+
+        Methods whose levels have extra stages (e.g. the sparse stage of
+        :mod:`varflow.twoframe.sparse`) override it; the driver tells the solver
+        which warp it is in ``state["warp"]``.
+        """
+        return self.n_warps
+
 
 class WarpSolver(Protocol):
     def __call__(
@@ -178,7 +188,7 @@ def coarse_to_fine(
     pyr0 = build_pyramid(I0, shapes, params.scale_factor, params.pyramid_sigma)
     pyr1 = build_pyramid(I1, shapes, params.scale_factor, params.pyramid_sigma)
     n_levels = len(shapes)
-    total = n_levels * params.n_warps
+    total = sum(params.level_warps(shp) for shp in shapes)
     done = 0
     if init_flow is not None:
         flow = resize_flow(np.asarray(init_flow, np.float32), shapes[-1])
@@ -194,7 +204,8 @@ def coarse_to_fine(
         planes = np.concatenate([i1, dx, dy], axis=2)
         state = {"level": level, "previous": state}
         state["previous"].pop("previous", None)  # keep only one level of history
-        for _ in range(params.n_warps):
+        for k in range(params.level_warps(i0.shape[:2])):
+            state["warp"] = k
             warped, inside = warp_bicubic(planes, flow)
             flow = solve_warp(
                 i0,
@@ -211,10 +222,6 @@ def coarse_to_fine(
             done += 1
             if callback is not None:
                 callback(done, total)
-    log.debug(
-        "coarse_to_fine: %d levels x %d warps in %.3fs",
-        n_levels,
-        params.n_warps,
-        time.perf_counter() - t_start,
-    )
+    seconds = time.perf_counter() - t_start
+    log.debug("coarse_to_fine: %d levels, %d warps in %.3fs", n_levels, total, seconds)
     return flow
