@@ -1,0 +1,380 @@
+"""Pictures of dense multi-frame trajectories (Pillow only, no Matplotlib).
+
+* :func:`draw_trajectories` draws a grid of sampled trajectories as polylines over
+  a dimmed grey copy of the reference frame.
+* :func:`displacement_panels` tiles the Middlebury colour coding of the
+  displacement in every frame, with one colour scale shared by all frames.
+
+Trajectories follow the package convention: shape ``(F, H, W, 2)``, ``[n, y, x]``
+is the displacement ``(u, v)`` of reference pixel ``(x, y)`` in frame ``n``
+(u = ``[..., 0]`` rightwards, v = ``[..., 1]`` downwards), NaN where unknown; its
+position in frame ``n`` is ``(x + u, y + v)``.  Pixel ``(x, y)`` of an output image
+is row ``y``, column ``x``, and positions are rounded to the nearest pixel.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import numbers
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from .._validate import as_float_image
+from .colorwheel import color_wheel, flow_to_color
+
+__all__ = ["draw_trajectories", "displacement_panels"]
+
+logger = logging.getLogger(__name__)
+
+#: Brightness factor of the grey reference frame under the tracks.
+_DIM = 0.5
+#: Positions are clipped to this many pixels (PIL draws with C ints; larger values are
+#: meaningless for a picture).
+_COORD_LIMIT = 1e5
+#: Colour of the gaps between panels and of empty cells (never produced by flow_to_color).
+_GAP_COLOUR = (128, 128, 128)
+#: Components beyond this magnitude are unknown (the .flo 1e10 convention).
+_UNKNOWN_THRESHOLD = 1e9
+#: Step along the colour wheel between consecutive track indices (golden ratio).
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+
+ColourBy = str | Sequence[int]
+
+
+def _is_int(x: object) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
+
+
+def _check_traj(traj: Any, fn: str) -> np.ndarray:
+    arr = np.asarray(traj)
+    if arr.ndim != 4 or arr.shape[3] != 2 or min(arr.shape[:3]) < 1:
+        raise ValueError(
+            f"{fn}: traj must have shape (F, H, W, 2) with F, H, W >= 1, got {arr.shape}"
+        )
+    if arr.dtype == np.bool_ or not (
+        np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+    ):
+        raise ValueError(f"{fn}: traj must be a real-valued array, got dtype {arr.dtype}")
+    out = arr.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        out[np.abs(out) > _UNKNOWN_THRESHOLD] = np.nan
+    return out
+
+
+def _check_ref(ref: Any, n_frames: int, fn: str) -> int:
+    if not _is_int(ref) or not 0 <= int(ref) < n_frames:
+        raise ValueError(f"{fn}: ref must be an integer in 0..{n_frames - 1}, got {ref!r}")
+    return int(ref)
+
+
+def _check_max_radius(max_radius: Any, fn: str) -> float | None:
+    if max_radius is None:
+        return None
+    value = float(max_radius)
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{fn}: max_radius must be positive and finite, got {max_radius!r}")
+    return value
+
+
+def _background(reference_frame: Any, shape: tuple[int, int]) -> np.ndarray:
+    """Dimmed grey RGB copy of the reference frame, ``(H, W, 3)`` uint8."""
+    arr = np.asarray(reference_frame)
+    if arr.shape[:2] != shape or arr.ndim not in (2, 3):
+        raise ValueError(
+            f"draw_trajectories: reference_frame must have shape (H, W) or (H, W, C) with "
+            f"(H, W) = {shape} as in traj, got {arr.shape}"
+        )
+    img = as_float_image(arr, name="draw_trajectories: reference_frame")
+    if img.shape[2] >= 3:
+        grey = img[..., :3] @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    else:  # grey or grey + alpha
+        grey = img[..., 0]
+    value = np.floor(255.0 * _DIM * grey + 0.5).astype(np.uint8)
+    return np.repeat(value[..., None], 3, axis=2)
+
+
+def _direction_colours(disp: np.ndarray, max_radius: float | None) -> np.ndarray:
+    """Middlebury colours of displacements ``(K, 2)``: hue only, or hue + saturation."""
+    if max_radius is None:
+        radius = np.hypot(disp[:, 0], disp[:, 1])
+        unit = np.zeros_like(disp)
+        moving = radius > 0
+        # Slightly inside the unit circle: fully saturated but never "out of scale" dark.
+        unit[moving] = disp[moving] / radius[moving, None] * (1.0 - 1e-9)
+        return flow_to_color(unit[None], max_radius=1.0)[0]
+    return flow_to_color(disp[None], max_radius=max_radius)[0]
+
+
+def _track_colours(colour_by: ColourBy, disp: np.ndarray, max_radius: float | None) -> np.ndarray:
+    """Colours ``(K, 3)`` uint8 of ``K`` tracks with overall displacements ``disp``."""
+    n = disp.shape[0]
+    if isinstance(colour_by, str):
+        if colour_by == "direction":
+            return _direction_colours(disp, max_radius)
+        if colour_by == "index":
+            wheel = color_wheel()
+            idx = np.floor((np.arange(n) * _GOLDEN) % 1.0 * len(wheel)).astype(np.int64)
+            return wheel[idx % len(wheel)]
+        raise ValueError(
+            f"draw_trajectories: colour_by must be 'direction', 'index' or an RGB triple, "
+            f"got {colour_by!r}"
+        )
+    try:
+        rgb = np.asarray(colour_by)
+        ok = rgb.shape == (3,) and all(_is_int(c) or float(c).is_integer() for c in rgb.tolist())
+        ok = ok and bool(np.all((rgb >= 0) & (rgb <= 255)))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(
+            f"draw_trajectories: colour_by must be 'direction', 'index' or an RGB triple of "
+            f"integers in 0..255, got {colour_by!r}"
+        )
+    return np.tile(rgb.astype(np.uint8), (n, 1))
+
+
+def draw_trajectories(
+    reference_frame: np.ndarray,
+    traj: np.ndarray,
+    ref: int,
+    *,
+    step: int = 16,
+    mask: np.ndarray | None = None,
+    colour_by: ColourBy = "direction",
+    line_width: int = 1,
+    show_points: bool = True,
+    max_radius: float | None = None,
+) -> np.ndarray:
+    """Draw sampled trajectories as polylines over the reference frame.
+
+    Reference pixels are sampled on a grid every ``step`` pixels, starting at
+    ``min(step // 2, (size - 1) // 2)`` along each axis (so a ``step`` larger than
+    the frame still samples its centre), optionally only where ``mask`` is True.
+    Each sampled pixel ``(x, y)`` becomes the polyline through its positions
+    ``(x, y) + traj[n, y, x]`` for ``n = 0 .. F-1``, drawn over a grey copy of the
+    reference frame dimmed to half brightness; unknown (NaN) positions break the
+    line, and a dot marks the reference position ``(x, y)``.
+
+    Parameters
+    ----------
+    reference_frame : ndarray, shape (H, W) or (H, W, C)
+        ``uint8``, ``uint16`` or float in ``[0, 1]``; colour frames are converted
+        to grey (Rec. 601 luma of the first three channels).
+    traj : ndarray, shape (F, H, W, 2)
+        Trajectories relative to the reference frame (see the module docstring);
+        NaN, infinite or ``|value| > 1e9`` components mark unknown positions.
+    ref : int
+        Index of the reference frame, ``0 <= ref < F`` (validated; the reference
+        position of every track is its pixel ``(x, y)``).
+    step : int, default 16
+        Grid spacing in pixels, ``>= 1``.
+    mask : ndarray, shape (H, W), bool, optional
+        Only draw tracks of sampled pixels where ``mask`` is True.
+    colour_by : {"direction", "index"} or sequence of 3 ints, default "direction"
+        ``"direction"``: Middlebury colour-wheel colour
+        (:func:`~varflow.viz.colorwheel.flow_to_color`) of the overall displacement
+        of the track, from its first to its last known position;
+        ``"index"``: a distinct wheel hue per track (golden-ratio steps around the
+        wheel, so neighbouring tracks differ); an RGB triple: one fixed colour.
+    line_width : int, default 1
+        Line width in pixels, ``>= 1``; dots have radius ``line_width + 1``.
+    show_points : bool, default True
+        Mark the reference position of every drawn track with a dot.
+    max_radius : float, optional
+        Only for ``colour_by="direction"``.  None: colour by direction alone
+        (fully saturated hue).  A number: the Middlebury coding with this
+        saturation radius, so short tracks are paler and tracks longer than
+        ``max_radius`` are darkened.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), uint8
+        RGB image.
+
+    Raises
+    ------
+    ValueError
+        On a wrong ``traj`` shape or dtype, ``reference_frame`` or ``mask`` not
+        matching ``(H, W)``, ``ref`` out of range, ``step < 1``,
+        ``line_width < 1``, an invalid ``colour_by`` or a non-positive
+        ``max_radius`` (the message names the argument).
+
+    Notes
+    -----
+    Tracks with no known position are not drawn (no dot either).  A known
+    position between two unknown ones is drawn as a single point.  Positions are
+    rounded to the nearest pixel and clipped to ``±1e5``.  Drawing costs one
+    Pillow call per track segment, so ``step=1`` on a large frame is slow.
+    """
+    fn = "draw_trajectories"
+    uv = _check_traj(traj, fn)
+    n_frames, height, width = uv.shape[:3]
+    ref = _check_ref(ref, n_frames, fn)
+    if not _is_int(step) or step < 1:
+        raise ValueError(f"{fn}: step must be an integer >= 1, got {step!r}")
+    if not _is_int(line_width) or line_width < 1:
+        raise ValueError(f"{fn}: line_width must be an integer >= 1, got {line_width!r}")
+    radius = _check_max_radius(max_radius, fn)
+    background = _background(reference_frame, (height, width))
+
+    # Grid offset step // 2, but at least one sample (the centre) if step exceeds the image.
+    y0, x0 = min(step // 2, (height - 1) // 2), min(step // 2, (width - 1) // 2)
+    ys, xs = np.mgrid[y0:height:step, x0:width:step]
+    ys, xs = ys.ravel(), xs.ravel()
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != (height, width):
+            raise ValueError(
+                f"{fn}: mask must have shape (H, W) = {(height, width)}, got {m.shape}"
+            )
+        if m.dtype != np.bool_:
+            if not np.issubdtype(m.dtype, np.integer) or not np.isin(m, (0, 1)).all():
+                raise ValueError(f"{fn}: mask must be boolean (or integers 0/1), got {m.dtype}")
+            m = m.astype(np.bool_)
+        keep = m[ys, xs]
+        ys, xs = ys[keep], xs[keep]
+
+    track_uv = uv[:, ys, xs]  # (F, K, 2)
+    known = np.isfinite(track_uv).all(axis=2)  # (F, K)
+    drawn = known.any(axis=0)
+    ys, xs, track_uv, known = ys[drawn], xs[drawn], track_uv[:, drawn], known[:, drawn]
+    n_tracks = ys.size
+    logger.debug("%s: %d tracks (step %d) over %d frames", fn, n_tracks, step, n_frames)
+
+    first = np.argmax(known, axis=0)
+    last = n_frames - 1 - np.argmax(known[::-1], axis=0)
+    cols = np.arange(n_tracks)
+    disp = track_uv[last, cols] - track_uv[first, cols]  # (K, 2)
+    colours = _track_colours(colour_by, disp, radius)
+
+    pos = np.stack([xs, ys], axis=-1)[None] + track_uv  # (F, K, 2) as (x, y)
+    pos = np.rint(np.clip(np.nan_to_num(pos), -_COORD_LIMIT, _COORD_LIMIT)).astype(np.int64)
+
+    image = Image.fromarray(background)
+    draw = ImageDraw.Draw(image)
+    half = (line_width - 1) / 2.0
+    for k in range(n_tracks):
+        fill = tuple(int(c) for c in colours[k])
+        ok = known[:, k]
+        # Runs of consecutive known frames: boundaries where ``ok`` changes.
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], ok, [False]]).astype(np.int8)))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            points = [(int(p[0]), int(p[1])) for p in pos[a:b, k]]
+            if len(points) > 1:
+                draw.line(points, fill=fill, width=line_width, joint="curve")
+            elif line_width == 1:
+                draw.point(points, fill=fill)
+            else:
+                x, y = points[0]
+                draw.ellipse([x - half, y - half, x + half, y + half], fill=fill)
+    if show_points:
+        r = line_width + 1
+        for k in range(n_tracks):
+            x, y = int(xs[k]), int(ys[k])
+            draw.ellipse([x - r, y - r, x + r, y + r], fill=tuple(int(c) for c in colours[k]))
+    return np.asarray(image, dtype=np.uint8).copy()
+
+
+def _shared_radius(uv: np.ndarray) -> float:
+    """Largest known displacement magnitude (plus 1e-5 relative), 1.0 if there is none."""
+    magnitude = np.hypot(uv[..., 0], uv[..., 1])
+    known = np.isfinite(magnitude)
+    top = float(magnitude[known].max()) if known.any() else 0.0
+    return top * (1.0 + 1e-5) if top > 0 else 1.0
+
+
+def _label(
+    draw: ImageDraw.ImageDraw, font: Any, x0: int, y0: int, w: int, h: int, text: str
+) -> None:
+    """Black text on a white box in the top-left corner of a panel, if it fits."""
+    left, top, right, bottom = draw.textbbox((0, 0), text, font=font)
+    tw, th = right - left, bottom - top
+    if tw + 4 > w or th + 4 > h:
+        return
+    draw.rectangle([x0, y0, x0 + tw + 3, y0 + th + 3], fill=(255, 255, 255))
+    draw.text((x0 + 2 - left, y0 + 2 - top), text, fill=(0, 0, 0), font=font)
+
+
+def displacement_panels(
+    traj: np.ndarray,
+    ref: int,
+    *,
+    max_radius: float | None = None,
+    columns: int | None = None,
+    gap: int = 2,
+    labels: bool = True,
+) -> np.ndarray:
+    """Tile the colour-coded displacement of every frame into one image.
+
+    Parameters
+    ----------
+    traj : ndarray, shape (F, H, W, 2)
+        Trajectories relative to the reference frame; NaN where unknown (drawn
+        black, as in :func:`~varflow.viz.colorwheel.flow_to_color`).
+    ref : int
+        Index of the reference frame, ``0 <= ref < F``; its panel is labelled
+        ``"<ref> ref"``.
+    max_radius : float, optional
+        Saturation radius shared by all panels, so that colours compare across
+        frames.  Default: the largest known displacement magnitude of the whole
+        clip (all-zero or all-unknown clips use 1).
+    columns : int, optional
+        Panels per row, ``>= 1``; default ``ceil(sqrt(F))``.  Frames fill the grid
+        row by row; ``rows = ceil(F / columns)``.
+    gap : int, default 2
+        Width in pixels of the grey (128) separation between panels, ``>= 0``.
+        Empty cells of the last row are grey too.
+    labels : bool, default True
+        Write the frame index in the top-left corner of each panel (Pillow's
+        default font, black on a white box), when the text fits in the panel.
+
+    Returns
+    -------
+    ndarray, shape (rows * H + (rows - 1) * gap, columns * W + (columns - 1) * gap, 3)
+        ``uint8`` RGB image; panel ``n`` has its top-left corner at
+        ``((n // columns) * (H + gap), (n % columns) * (W + gap))``.
+
+    Raises
+    ------
+    ValueError
+        On a wrong ``traj`` shape or dtype, ``ref`` out of range, ``columns < 1``,
+        ``gap < 0`` or a non-positive ``max_radius`` (the message names the
+        argument).
+    """
+    fn = "displacement_panels"
+    uv = _check_traj(traj, fn)
+    n_frames, height, width = uv.shape[:3]
+    ref = _check_ref(ref, n_frames, fn)
+    radius = _check_max_radius(max_radius, fn)
+    if columns is None:
+        columns = math.ceil(math.sqrt(n_frames))
+    elif not _is_int(columns) or columns < 1:
+        raise ValueError(f"{fn}: columns must be None or an integer >= 1, got {columns!r}")
+    if not _is_int(gap) or gap < 0:
+        raise ValueError(f"{fn}: gap must be an integer >= 0, got {gap!r}")
+    columns, gap = int(columns), int(gap)
+    rows = math.ceil(n_frames / columns)
+    if radius is None:
+        radius = _shared_radius(uv)
+    logger.debug("%s: %d panels in %d x %d, max_radius %.6g", fn, n_frames, rows, columns, radius)
+
+    canvas = np.empty(
+        (rows * height + (rows - 1) * gap, columns * width + (columns - 1) * gap, 3), np.uint8
+    )
+    canvas[:] = _GAP_COLOUR
+    for n in range(n_frames):
+        y0, x0 = (n // columns) * (height + gap), (n % columns) * (width + gap)
+        canvas[y0 : y0 + height, x0 : x0 + width] = flow_to_color(uv[n], max_radius=radius)
+    if not labels:
+        return canvas
+    image = Image.fromarray(canvas)
+    draw = ImageDraw.Draw(image)
+    font = ImageFont.load_default()
+    for n in range(n_frames):
+        y0, x0 = (n // columns) * (height + gap), (n % columns) * (width + gap)
+        _label(draw, font, x0, y0, width, height, f"{n} ref" if n == ref else str(n))
+    return np.asarray(image, dtype=np.uint8).copy()

@@ -1,0 +1,260 @@
+"""Tests of the trajectory pictures (varflow.viz.plots)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from varflow.viz.colorwheel import flow_to_color
+from varflow.viz.plots import displacement_panels, draw_trajectories
+
+F, H, W, REF = 5, 32, 48, 2
+
+
+def translation(du: float, dv: float, n_frames: int = F, ref: int = REF) -> np.ndarray:
+    """Constant translation (du, dv) per frame, zero at the reference frame."""
+    steps = (np.arange(n_frames) - ref).astype(np.float32)
+    traj = np.zeros((n_frames, H, W, 2), np.float32)
+    traj[..., 0] = steps[:, None, None] * du
+    traj[..., 1] = steps[:, None, None] * dv
+    return traj
+
+
+def drawn(img: np.ndarray) -> np.ndarray:
+    """Pixels that differ from the black background of a blank frame."""
+    return img.any(axis=2)
+
+
+BLANK = np.zeros((H, W), np.uint8)
+
+
+# --------------------------------------------------------------------------- basics
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        np.zeros((H, W), np.uint8),
+        np.zeros((H, W, 3), np.uint16),
+        np.zeros((H, W, 1), np.float32),
+        np.zeros((H, W, 4), np.uint8),
+    ],
+)
+def test_shape_and_dtype(frame):
+    img = draw_trajectories(frame, translation(1, 1), REF)
+    assert img.shape == (H, W, 3) and img.dtype == np.uint8
+    assert drawn(img).any()
+
+
+def test_background_is_dimmed_grey():
+    frame = np.zeros((H, W, 3), np.uint8)
+    frame[..., 0] = 200  # pure red 200 -> luma 0.299 * 200 = 59.8 -> dimmed 29.9
+    img = draw_trajectories(frame, np.full((F, H, W, 2), np.nan), REF)
+    assert np.all(img == 30)
+    grey16 = np.full((H, W), 65535, np.uint16)
+    assert np.all(draw_trajectories(grey16, np.full((F, H, W, 2), np.nan), REF) == 128)
+    grey_float = np.full((H, W), 0.5, np.float64)
+    assert np.all(draw_trajectories(grey_float, np.full((F, H, W, 2), np.nan), REF) == 64)
+
+
+def test_straight_horizontal_trajectory():
+    # step 24 samples (x, y) = (12, 12) and (36, 12); positions x - 10 .. x + 10.
+    img = draw_trajectories(BLANK, translation(5, 0), REF, step=24, show_points=False)
+    expected = np.zeros((H, W), bool)
+    expected[12, 2:23] = True
+    expected[12, 26:47] = True
+    np.testing.assert_array_equal(drawn(img), expected)
+    assert np.all(img[expected] == flow_to_color(np.array([[[1.0, 0.0]]]))[0, 0])
+    assert tuple(img[12, 5]) == (255, 0, 0)  # rightwards = red on the Middlebury wheel
+
+
+def test_points_and_line_width_stay_near_the_line():
+    img = draw_trajectories(BLANK, translation(5, 0), REF, step=24)
+    ys, xs = np.nonzero(drawn(img))
+    assert set(ys) == {10, 11, 12, 13, 14}  # dots of radius 2 around row 12
+    assert set(np.flatnonzero(drawn(img)[11])) <= {10, 11, 12, 13, 14, 34, 35, 36, 37, 38}
+    thick = draw_trajectories(
+        BLANK, translation(5, 0), REF, step=24, line_width=3, show_points=False
+    )
+    rows = set(np.nonzero(drawn(thick))[0])
+    assert rows == {11, 12, 13}
+    assert drawn(thick)[11, 5] and drawn(thick)[13, 5]
+
+
+def test_nan_breaks_the_line():
+    traj = translation(5, 0)
+    traj[3, 12, 12] = np.nan  # track at (12, 12): x = 2, 7, 12, NaN, 22
+    traj[:, 12, 36] = np.nan  # track at (36, 12): entirely unknown -> not drawn
+    img = draw_trajectories(BLANK, traj, REF, step=24, show_points=False)
+    expected = np.zeros((H, W), bool)
+    expected[12, 2:13] = True  # polyline through frames 0..2
+    expected[12, 22] = True  # isolated known position of frame 4
+    np.testing.assert_array_equal(drawn(img), expected)
+    with_points = draw_trajectories(BLANK, traj, REF, step=24)
+    assert not drawn(with_points)[:, 30:].any()  # no dot for the unknown track
+
+
+def test_step_and_mask_reduce_tracks():
+    still = np.zeros((F, H, W, 2), np.float32)
+
+    def n_dots(img: np.ndarray) -> int:
+        return ndimage.label(drawn(img))[1]
+
+    for step in (6, 8, 16):
+        expected = len(range(step // 2, H, step)) * len(range(step // 2, W, step))
+        assert n_dots(draw_trajectories(BLANK, still, REF, step=step)) == expected
+    assert n_dots(draw_trajectories(BLANK, still, REF, step=8)) == 4 * 6
+    mask = np.zeros((H, W), bool)
+    mask[:, :24] = True  # columns 4, 12, 20 of 4, 12, ..., 44
+    assert n_dots(draw_trajectories(BLANK, still, REF, step=8, mask=mask)) == 4 * 3
+    assert n_dots(draw_trajectories(BLANK, still, REF, step=8, mask=mask.astype(int))) == 12
+    assert not drawn(draw_trajectories(BLANK, still, REF, step=8, mask=~np.ones_like(mask))).any()
+
+
+# --------------------------------------------------------------------------- colours
+
+
+@pytest.mark.parametrize(("du", "dv"), [(3.0, -4.0), (-2.0, 1.0), (0.0, 3.0), (-4.0, 0.0)])
+def test_direction_colour(du, dv):
+    img = draw_trajectories(BLANK, translation(du, dv), REF, step=64, show_points=False)
+    # step > frame: a single track at the centre (23, 15); a point two frames after the ref
+    x, y = int(round(23 + 2 * du)), int(round(15 + 2 * dv))
+    expected = flow_to_color(np.array([[[du, dv]]]))[0, 0].astype(int)
+    assert np.abs(img[y, x].astype(int) - expected).max() <= 1
+    assert expected.max() == 255  # fully saturated wheel colour
+
+
+def test_direction_colour_with_max_radius():
+    # overall displacement (first -> last known frame) = 4 * (3, -4) = (12, -16), length 20
+    img = draw_trajectories(
+        BLANK, translation(3, -4), REF, step=64, show_points=False, max_radius=40.0
+    )
+    expected = flow_to_color(np.array([[[12.0, -16.0]]]), max_radius=40.0)[0, 0]
+    np.testing.assert_array_equal(img[15 - 4, 23 + 3], expected)
+    assert expected.min() > 100  # half the radius: a pale colour
+    dark = draw_trajectories(BLANK, translation(3, -4), REF, step=64, max_radius=5.0)
+    assert dark[15, 23].max() < 200  # beyond the radius: darkened
+
+
+def test_direction_mixed_tracks():
+    traj = np.zeros((F, H, W, 2), np.float32)
+    steps = np.arange(F) - REF
+    traj[:, :, :24, 0] = steps[:, None, None] * 2.0  # left half moves right
+    traj[:, :, 24:, 0] = -steps[:, None, None] * 2.0  # right half moves left
+    img = draw_trajectories(BLANK, traj, REF, step=24, show_points=False)
+    right = flow_to_color(np.array([[[1.0, 0.0]]]))[0, 0]
+    left = flow_to_color(np.array([[[-1.0, 0.0]]]))[0, 0]
+    np.testing.assert_array_equal(img[12, 15], right)
+    np.testing.assert_array_equal(img[12, 33], left)
+    assert not np.array_equal(right, left)
+
+
+def test_index_and_fixed_colours():
+    still = translation(1, 0)
+    img = draw_trajectories(BLANK, still, REF, step=8, colour_by="index")
+    labels, n = ndimage.label(drawn(img))
+    colours = {tuple(img[labels == k][0]) for k in range(1, n + 1)}
+    assert n == 24 and len(colours) >= 20  # (nearly) one colour per track
+    fixed = draw_trajectories(BLANK, still, REF, step=8, colour_by=(10, 200, 30))
+    assert {tuple(c) for c in fixed[drawn(fixed)]} == {(10, 200, 30)}
+
+
+# --------------------------------------------------------------------------- panels
+
+
+def test_displacement_panels_layout_and_colours():
+    rng = np.random.default_rng(3)
+    traj = rng.normal(scale=3.0, size=(F, 10, 12, 2)).astype(np.float32)
+    traj[REF] = 0.0
+    traj[1, 0, 0] = np.nan
+    out = displacement_panels(traj, REF, labels=False)
+    cols, rows = 3, 2  # ceil(sqrt(5)) columns
+    assert out.dtype == np.uint8 and out.shape == (rows * 10 + 2, cols * 12 + 4, 3)
+    radius = float(np.nanmax(np.hypot(traj[..., 0], traj[..., 1]))) * (1 + 1e-5)
+    for n in range(F):
+        y0, x0 = (n // cols) * 12, (n % cols) * 14
+        np.testing.assert_array_equal(
+            out[y0 : y0 + 10, x0 : x0 + 12], flow_to_color(traj[n], max_radius=radius)
+        )
+    assert np.all(out[10:12] == 128) and np.all(out[:, 12:14] == 128)  # gaps
+    assert np.all(out[12:, 28:] == 128)  # empty sixth cell
+    assert np.all(out[0:10, 14:26][0, 0] == 0)  # NaN -> black
+    assert np.all(out[0:10, 28:40] == 255)  # reference frame panel: zero motion is white
+
+
+@pytest.mark.parametrize(
+    ("n_frames", "columns", "gap", "shape"),
+    [
+        (5, None, 2, (22, 40)),
+        (5, 5, 2, (10, 68)),
+        (5, 2, 0, (30, 24)),
+        (9, None, 1, (32, 38)),
+        (2, 1, 3, (23, 12)),
+    ],
+)
+def test_displacement_panels_sizes(n_frames, columns, gap, shape):
+    traj = np.ones((n_frames, 10, 12, 2), np.float32)
+    out = displacement_panels(traj, 0, columns=columns, gap=gap)
+    rows = math.ceil(n_frames / (columns or math.ceil(math.sqrt(n_frames))))
+    assert out.shape == (*shape, 3)
+    assert out.shape[0] == rows * 10 + (rows - 1) * gap
+
+
+def test_displacement_panels_labels_and_shared_radius():
+    traj = translation(1, 0)  # frame n moves by (n - 2, 0): |max| = 2
+    plain = displacement_panels(traj, REF, labels=False, gap=0, columns=F)
+    labelled = displacement_panels(traj, REF, gap=0, columns=F)
+    differs = (plain != labelled).any(axis=2)
+    assert differs.any() and not differs[H // 2 :].any()  # labels only in the top rows
+    assert not differs[:, 30:W].any()  # ... and only at the left of each panel
+    # shared scale: frame 3 (|d| = 1) is paler than frame 4 (|d| = 2, saturated)
+    assert plain[H - 1, 3 * W + W - 1].min() > plain[H - 1, 4 * W + W - 1].min()
+    fixed = displacement_panels(traj, REF, labels=False, gap=0, columns=F, max_radius=4.0)
+    np.testing.assert_array_equal(fixed[:, 4 * W :], flow_to_color(traj[4], max_radius=4.0))
+
+
+# --------------------------------------------------------------------------- validation
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs", "name"),
+    [
+        ((BLANK, np.zeros((F, H, W)), REF), {}, "traj"),
+        ((BLANK, np.zeros((F, H, W, 3)), REF), {}, "traj"),
+        ((BLANK, np.zeros((F, H, W, 2), bool), REF), {}, "traj"),
+        ((BLANK, np.zeros((F, H, W, 2)), F), {}, "ref"),
+        ((BLANK, np.zeros((F, H, W, 2)), -1), {}, "ref"),
+        ((BLANK, np.zeros((F, H, W, 2)), 1.5), {}, "ref"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"step": 0}, "step"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"step": 2.5}, "step"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"line_width": 0}, "line_width"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"mask": np.ones((H, W + 1), bool)}, "mask"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"colour_by": "speed"}, "colour_by"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"colour_by": (1, 2)}, "colour_by"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"colour_by": (0, 0, 300)}, "colour_by"),
+        ((BLANK, np.zeros((F, H, W, 2)), REF), {"max_radius": 0.0}, "max_radius"),
+        ((np.zeros((H, W + 1)), np.zeros((F, H, W, 2)), REF), {}, "reference_frame"),
+        ((np.full((H, W), 2.0), np.zeros((F, H, W, 2)), REF), {}, "reference_frame"),
+    ],
+)
+def test_draw_trajectories_invalid(args, kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        draw_trajectories(*args, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("traj", "ref", "kwargs", "name"),
+    [
+        (np.zeros((F, H, W)), 0, {}, "traj"),
+        (np.zeros((F, H, W, 2)), F, {}, "ref"),
+        (np.zeros((F, H, W, 2)), 0, {"columns": 0}, "columns"),
+        (np.zeros((F, H, W, 2)), 0, {"gap": -1}, "gap"),
+        (np.zeros((F, H, W, 2)), 0, {"max_radius": -1.0}, "max_radius"),
+    ],
+)
+def test_displacement_panels_invalid(traj, ref, kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        displacement_panels(traj, ref, **kwargs)
