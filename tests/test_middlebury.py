@@ -135,7 +135,8 @@ def test_format_table_single_method() -> None:
         (0.2977 + 0.1118) / 2, abs=1e-4)
     ratio = float(_cells(table, "ratio to book TV-only")[1])
     assert ratio == pytest.approx(0.2 / ((0.2977 + 0.1118) / 2), abs=1e-3)
-    assert "% improved" not in table  # only with tvl1 and another method
+    assert "% improved" not in table  # only with a baseline and another method
+    assert _cells(table, "total s")[3] == "2.00"  # the seconds column summed
 
 
 def test_format_table_adds_columns_and_improvement_row() -> None:
@@ -150,6 +151,14 @@ def test_format_table_adds_columns_and_improvement_row() -> None:
     assert float(improved[1]) == 0.0
     widths = {len(line) for line in table.splitlines()}
     assert len(widths) == 1  # aligned
+
+
+def test_format_table_baseline_is_first_method_without_tvl1() -> None:
+    rows = [_row("Venus", "tensor", 0.20), _row("Venus", "other", 0.19)]
+    improved = _cells(bench.format_table(rows), "% improved vs tensor")
+    assert float(improved[4]) == pytest.approx(5.0, abs=0.05) and float(improved[1]) == 0.0
+    explicit = _cells(bench.format_table(rows, baseline="other"), "% improved vs other")
+    assert float(explicit[1]) == pytest.approx(100 * (0.19 - 0.20) / 0.19, abs=0.05)
 
 
 # ----------------------------------------------------------------------------- runner + CLI

@@ -63,6 +63,7 @@ def flow(
     params: Any = None,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
+    stats: dict | None = None,
     **overrides: Any,
 ) -> np.ndarray:
     """Estimate dense optical flow from ``frame0`` to ``frame1``.
@@ -80,6 +81,9 @@ def flow(
         Initial estimate.
     callback : callable, optional
         ``callback(done, total)`` after every warp (for progress bars).
+    stats : dict, optional
+        Filled with timings and counters of the run (levels, warps, seconds and
+        method-specific entries such as ``sparse_seconds``).
     **overrides
         Parameter fields to change, e.g. ``data_weight=30.0``.
 
@@ -96,7 +100,9 @@ def flow(
     """
     m = get_method(method)
     p = make_params(m, params, **overrides)
-    return coarse_to_fine(frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback)
+    return coarse_to_fine(
+        frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback, stats=stats
+    )
 
 
 def __getattr__(name: str) -> Any:

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .twoframe import sparse as _sparse
 from .twoframe import tensor as _tensor
 from .twoframe import tvl1 as _tvl1
 from .twoframe.coarse_to_fine import CoarseToFineParams, WarpSolver
@@ -50,6 +51,30 @@ METHODS: dict[str, Method] = {
         params=_tensor.TensorParams,
         solve_warp=_tensor.solve_warp,
         description="tensor-directed TV-L1 (anisotropic TV following image structure)",
+    ),
+    "sparse-dct": Method(
+        name="sparse-dct",
+        params=_sparse.SparseDCTParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1, fixed overcomplete DCT dictionary",
+    ),
+    "sparse-1d": Method(
+        name="sparse-1d",
+        params=_sparse.Sparse1DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1, MOD dictionary shared by u and v",
+    ),
+    "sparse-2x1d": Method(
+        name="sparse-2x1d",
+        params=_sparse.Sparse2x1DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1, MOD dictionaries for u and for v",
+    ),
+    "sparse-2d": Method(
+        name="sparse-2d",
+        params=_sparse.Sparse2DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
     ),
 }
 

@@ -217,7 +217,7 @@ def _fmt(value: float | None, digits: int) -> str:
     return f"{value:.{digits}f}"
 
 
-def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
+def format_table(rows: Sequence[Mapping[str, Any]], baseline: str | None = None) -> str:
     """Lay benchmark rows out as a Markdown table, one line per sequence.
 
     Columns: the sequence, then ``AEE``, ``AAE`` and seconds for every method (in
@@ -226,14 +226,18 @@ def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
     * ``mean`` — mean of each column over the sequences;
     * ``ratio to book TV-only`` — mean AEE of each method divided by the mean of the
       book's TV-only AEE over the same sequences (1.00 = on par);
-    * ``% improved vs TV-only`` — only when ``tvl1`` and another method are both
-      present: ``100 (mean_tvl1 - mean_m) / mean_tvl1`` for every other method m,
-      over the sequences both methods ran on (positive = better than TV-only).
+    * ``total s`` — the summed seconds of each method over the sequences;
+    * ``% improved vs B`` — when the baseline method ``B`` and another method are
+      both present: ``100 (mean_B - mean_m) / mean_B`` for every other method m,
+      over the sequences both methods ran on (positive = better than the baseline).
 
     Parameters
     ----------
     rows : sequence of mapping
         As returned by :func:`run_middlebury` (or read back from its CSV).
+    baseline : str, optional
+        Method the improvement row compares against: ``tvl1`` (the book's
+        "TV-only") when present, else the first method.
 
     Returns
     -------
@@ -271,28 +275,35 @@ def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
         body.append(line)
 
     mean_line = ["mean"]
+    total_line = ["total s"]
     ratio_line = ["ratio to book TV-only"]
     for m in methods:
         ran = [s for s in seqs if get(s, m, "aee") is not None]
         mean_aee = _mean(get(s, m, "aee") for s in ran)
         mean_line += [_fmt(mean_aee, 4), _fmt(_mean(get(s, m, "aae") for s in ran), 3),
                       _fmt(_mean(get(s, m, "seconds") for s in ran), 2)]
+        secs = [get(s, m, "seconds") for s in ran]
+        total_line += ["", "", _fmt(sum(v for v in secs if v is not None), 2)]
         book = _mean(BOOK_TV_AEE.get(s) for s in ran)
         ratio_line += [_fmt(mean_aee / book if book > 0 else math.nan, 3), "", ""]
     mean_line.append(_fmt(_mean(BOOK_TV_AEE.get(s) for s in seqs), 4))
     ratio_line.append("1.000")
-    body += [mean_line, ratio_line]
+    total_line.append("")
+    body += [mean_line, total_line, ratio_line]
 
-    others = [m for m in methods if m != BASELINE_METHOD]
-    if BASELINE_METHOD in methods and others:
-        line = ["% improved vs TV-only"]
+    if baseline is None:
+        baseline = BASELINE_METHOD if BASELINE_METHOD in methods else methods[0]
+    others = [m for m in methods if m != baseline]
+    if baseline in methods and others:
+        label = "TV-only" if baseline == BASELINE_METHOD else baseline
+        line = [f"% improved vs {label}"]
         for m in methods:
-            if m == BASELINE_METHOD:
+            if m == baseline:
                 line += ["0.0", "", ""]
                 continue
             both = [s for s in seqs
-                    if get(s, m, "aee") is not None and get(s, BASELINE_METHOD, "aee") is not None]
-            base = _mean(get(s, BASELINE_METHOD, "aee") for s in both)
+                    if get(s, m, "aee") is not None and get(s, baseline, "aee") is not None]
+            base = _mean(get(s, baseline, "aee") for s in both)
             mine = _mean(get(s, m, "aee") for s in both)
             line += [_fmt(100.0 * (base - mine) / base if base > 0 else math.nan, 1), "", ""]
         line.append("")

@@ -78,6 +78,7 @@ BOOK_TENSOR_AEE: dict[str, float] = {
 #: when a method with a published counterpart is registered.
 BOOK_REFERENCE_AEE: dict[str, dict[str, float]] = {
     "tvl1": BOOK_TV_AEE,
+    "tensor": BOOK_TENSOR_AEE,
 }
 
 SINTEL_PASSES: tuple[str, ...] = ("clean", "final")

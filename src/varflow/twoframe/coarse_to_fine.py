@@ -160,6 +160,7 @@ def coarse_to_fine(
     params: CoarseToFineParams,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
+    stats: dict | None = None,
 ) -> np.ndarray:
     """Estimate the flow from ``frame0`` to ``frame1`` coarse to fine.
 
@@ -174,6 +175,10 @@ def coarse_to_fine(
         Initial flow at full resolution; it is downsampled to the coarsest level.
     callback : callable, optional
         ``callback(done, total)`` after each warp.
+    stats : dict, optional
+        Filled with counters and per-stage seconds: ``levels``, ``warps``,
+        ``seconds`` and whatever the solver records (it sees the same dict as
+        ``state["stats"]``, e.g. the sparse method's ``sparse_seconds``).
 
     Returns
     -------
@@ -195,6 +200,7 @@ def coarse_to_fine(
     else:
         flow = np.zeros(shapes[-1] + (2,), np.float32)
     n_ch = I0.shape[2]
+    stats = {} if stats is None else stats
     state: dict = {}
     for level in range(n_levels - 1, -1, -1):
         i0, i1 = pyr0[level], pyr1[level]
@@ -202,7 +208,7 @@ def coarse_to_fine(
             flow = resize_flow(flow, i0.shape[:2])
         dx, dy = image_derivatives(i1)
         planes = np.concatenate([i1, dx, dy], axis=2)
-        state = {"level": level, "previous": state}
+        state = {"level": level, "previous": state, "stats": stats}
         state["previous"].pop("previous", None)  # keep only one level of history
         for k in range(params.level_warps(i0.shape[:2])):
             state["warp"] = k
@@ -223,5 +229,6 @@ def coarse_to_fine(
             if callback is not None:
                 callback(done, total)
     seconds = time.perf_counter() - t_start
+    stats.update(levels=n_levels, warps=total, seconds=seconds)
     log.debug("coarse_to_fine: %d levels, %d warps in %.3fs", n_levels, total, seconds)
     return flow

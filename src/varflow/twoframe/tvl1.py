@@ -420,6 +420,34 @@ def init_level_state(
     state["q"] = np.zeros((nc, h, w), np.float32)
 
 
+def planar(x: np.ndarray) -> np.ndarray:
+    """``(H, W, K)`` -> C-contiguous planar ``(K, H, W)`` float32 (the kernels' layout)."""
+    return np.ascontiguousarray(np.moveaxis(x, -1, 0), dtype=np.float32)
+
+
+def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
+    """The linearised colour constancy residual ``ρ_c(u) = a_c + ∇I1w_c · u`` of one warp.
+
+    Parameters
+    ----------
+    I0, I1w, I1w_dx, I1w_dy : ndarray, shape (H, W, C), float32
+    inside : ndarray, shape (H, W), bool
+        The data term is switched off (all of ``ix, iy, a`` zero) outside.
+    flow0 : ndarray, shape (H, W, 2)
+        Linearisation point.
+
+    Returns
+    -------
+    ix, iy, a : ndarray, shape (C, H, W), float32, planar
+        ``a = I1w - I0 - ∇I1w · flow0``.
+    """
+    m = inside[..., None].astype(np.float32)
+    ixh = I1w_dx * m
+    iyh = I1w_dy * m
+    ah = (I1w - I0 - ixh * flow0[..., :1] - iyh * flow0[..., 1:2]) * m
+    return planar(ixh), planar(iyh), planar(ah)
+
+
 def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict,
              engine: str = "numba") -> np.ndarray:
     """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
@@ -430,12 +458,8 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     """
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
-    m = inside[..., None].astype(np.float32)
-    ixh = I1w_dx * m
-    iyh = I1w_dy * m
-    ah = (I1w - I0 - ixh * flow0[..., :1] - iyh * flow0[..., 1:2]) * m
-    planar = lambda x: np.ascontiguousarray(np.moveaxis(x, -1, 0), dtype=np.float32)  # noqa: E731
-    ix, iy, a, u = planar(ixh), planar(iyh), planar(ah), planar(flow0)
+    ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
+    u = planar(flow0)
     tens = state["tensor"]
     aniso = tens is not None
     if not aniso:

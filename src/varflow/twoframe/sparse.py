@@ -1,0 +1,642 @@
+"""Sparse-regularised TV-L1: flow patches coded over an overcomplete dictionary.
+
+Energy (Jia, Wang & Tang, "Optical flow estimation using learned sparse model",
+ICCV 2011; Gibson & Marques 2016, ch. 3), at one pyramid level::
+
+    E(u, α) = λ Σ_c |ρ_c(u)| + λ_TV Σ_k R(u_k) + λ_SP Σ_p ||R_p u − D α_p||²,
+    α_p sparse,
+
+with ``R`` the (edge-weighted) isotropic TV ``g |∇u_k|`` or the tensor-directed TV
+``|D_x ∇u_k|`` (:mod:`varflow.twoframe.tensor`), ``R_p`` the extraction of the
+``m × n`` flow patch ``p`` on a grid with offset ``k`` (:class:`varflow.sparse.PatchGrid`)
+and ``D`` an overcomplete dictionary (fixed 2-D DCT, or learned by MOD in the "1D",
+"2x1D" or "2D" layout, :mod:`varflow.sparse.dictionaries`).
+
+Because ``Σ_p ||R_p u − D α_p||² = Σ_x c(x) |u(x) − ū(x)|² + const`` with ``c(x)`` the
+number of patches covering ``x`` and ``ū`` the average of the overlapping patch
+approximations, the sparse term is a weighted quadratic pull towards the sparse
+approximation ``ū``.  The weight is normalised by the mean coverage ``m n / k²`` so
+that λ_SP means the same for every patch size and offset.
+
+Bootstrap, at each pyramid level whose smaller side is at least ``sparse_min_size``
+(the driver's warps ``0 … n_warps-1`` are the TV-only stage, the next
+``sparse_warps`` the sparse stage):
+
+1. the TV-only (or tensor) TV-L1 flow of the level, as in :mod:`varflow.twoframe.tvl1`;
+2. the dictionary is refreshed from that flow by MOD (``mod_iterations`` passes,
+   tolerance ``mod_tolerance``), starting from the coarser level's dictionary
+   (the overcomplete DCT at the first level), or kept fixed for ``dictionary="dct"``;
+3. at every sparse warp the current flow is coded by batch OMP (error threshold
+   μ = ``omp_tolerance``) to give ``ū``, and the combined energy, linearised at the
+   warp and smoothed (Huber with μ_data, μ_TV), is minimised by Nesterov's
+   accelerated gradient method with NESTA's continuation on the smoothing
+   (Becker, Bobin & Candès 2011) and a diagonal (Gershgorin) preconditioner.
+
+The 5×5 median filter of the driver follows every warp, as in the book.
+
+Symbol map: λ = ``data_weight``, λ_TV = ``sparse_tv_weight``, λ_SP =
+``sparse_weight`` (times ``sparse_weight_decay`` per coarser level), μ =
+``omp_tolerance``, μ_TV = ``smoothing_tv``, μ_data = ``smoothing_data``, k =
+``patch_offset``, m = n = ``patch_size``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numba as nb
+import numpy as np
+
+from ..ops.differences import divergence, gradient
+from ..sparse import (
+    PatchGrid,
+    check_layout,
+    layout_dct,
+    learn_mod,
+    merge_problems,
+    omp,
+    reconstruct,
+    split_problems,
+)
+from .coarse_to_fine import _check
+from .tensor import TensorParams, diffusion_tensor
+from .tvl1 import _row_blocks, edge_weight, init_level_state, linearise, planar, run_warp
+
+__all__ = [
+    "SparseParams",
+    "SparseDCTParams",
+    "Sparse1DParams",
+    "Sparse2x1DParams",
+    "Sparse2DParams",
+    "solve_warp",
+    "sparse_approximation",
+    "learn_dictionaries",
+    "nesterov_iterations",
+    "nesterov_iterations_numpy",
+    "smoothed_energy",
+]
+
+log = logging.getLogger(__name__)
+
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+
+
+@dataclass(frozen=True)
+class SparseParams(TensorParams):
+    """Parameters of sparse-regularised TV-L1 (all TV-L1 and tensor fields too).
+
+    Attributes
+    ----------
+    edge_weight : float
+        c of the TV edge weight g(x) = exp(-c |∇I0|²), as in TV-L1.  Default 50.
+    regulariser : str
+        "tv" (isotropic, edge-weighted TV) or "tensor" (tensor-directed TV, fields
+        ``tensor_*``).  Default "tv".
+    dictionary : str
+        "mod" (learned from the flow by MOD, bootstrapped level by level) or "dct"
+        (fixed overcomplete 2-D DCT).  Default "mod".
+    layout : str
+        "1D" (one dictionary for u and v patches), "2x1D" (one each) or "2D" (joint
+        [u; v] patches).  Default "1D".
+    n_atoms : int
+        Number of atoms of each dictionary (the book uses 400 and 800).  Default 400.
+    patch_size : int
+        m = n, side of the square flow patches, pixels.  Default 10.
+    patch_offset : int
+        k, step of the patch grid, pixels (1 = fully overlapping), 1 ≤ k ≤ m.
+        Default 4: as accurate as k = 1 on Middlebury at a fraction of the cost
+        (see benchmarks/bench_sparse_offset.py).
+    omp_tolerance : float
+        μ, OMP stops when the RMS residual per patch entry is ≤ μ pixels.  Default 0.05.
+    omp_max_atoms : int
+        Maximum atoms per patch (0: no limit).  Default 16.
+    mod_iterations : int
+        MOD passes per pyramid level (book: 10).  Default 10.
+    mod_tolerance : float
+        MOD stops early when the representation error and the code size change by
+        less than this (relative).  Default 1e-3.
+    mod_max_signals : int
+        MOD trains on the patches of the offset-k grid (so k sets the cost of learning
+        as well as of coding), at most this many, drawn at random (seeded); 0 = all.
+        Default 0.
+    sparse_weight : float
+        λ_SP at the finest level (1/pixel² per pixel of coverage).  Default 2.
+    sparse_weight_decay : float
+        Factor applied to λ_SP per coarser level, in (0, 1].  Default 1.
+    sparse_tv_weight : float
+        λ_TV, weight of the TV term in the combined (sparse) stage relative to the
+        TV-only stage.  Default 1.
+    sparse_warps : int
+        Warps of the combined energy per level (after the ``n_warps`` TV-only
+        warps).  Default 2.
+    sparse_min_size : int
+        Levels whose smaller side is below this skip the sparse stage (pixels, at
+        least ``patch_size``).  Default 40.
+    nesterov_iterations : int
+        Nesterov iterations per sparse warp (split over the continuation stages).
+        Default 90.
+    nesterov_stages : int
+        NESTA continuation stages: the smoothing goes from 4^(stages-1) μ down to μ.
+        Default 1: the stage starts from the TV-L1 flow of the level, which a
+        coarser smoothing would first blur (RubberWhale, λ_SP = 0, 90 iterations:
+        AEE 0.1168 with 3 stages, 0.0987 with 1, TV-L1 itself 0.0994).
+    smoothing_tv : float
+        μ_TV, Huber smoothing of the TV term (pixels/pixel).  Default 0.01.
+    smoothing_data : float
+        μ_data, Huber smoothing of the L1 data term (intensity).  Default 0.01.
+    seed : int
+        Seed of the random choices (MOD training subset).  Default 0.
+    """
+
+    edge_weight: float = 50.0
+    regulariser: str = "tv"
+    dictionary: str = "mod"
+    layout: str = "1D"
+    n_atoms: int = 400
+    patch_size: int = 10
+    patch_offset: int = 4
+    omp_tolerance: float = 0.05
+    omp_max_atoms: int = 16
+    mod_iterations: int = 10
+    mod_tolerance: float = 1e-3
+    mod_max_signals: int = 0
+    sparse_weight: float = 2.0
+    sparse_weight_decay: float = 1.0
+    sparse_tv_weight: float = 1.0
+    sparse_warps: int = 2
+    sparse_min_size: int = 40
+    nesterov_iterations: int = 90
+    nesterov_stages: int = 1
+    smoothing_tv: float = 0.01
+    smoothing_data: float = 0.01
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check(self.regulariser in ("tv", "tensor"), "regulariser",
+               f"must be 'tv' or 'tensor', got {self.regulariser!r}")
+        _check(self.dictionary in ("mod", "dct"), "dictionary",
+               f"must be 'mod' or 'dct', got {self.dictionary!r}")
+        try:
+            check_layout(self.layout)
+        except ValueError:
+            raise ValueError(
+                f"layout: must be one of '1D', '2x1D', '2D', got {self.layout!r}"
+            ) from None
+        _check(self.patch_size >= 2, "patch_size", f"must be >= 2, got {self.patch_size}")
+        _check(1 <= self.patch_offset <= self.patch_size, "patch_offset",
+               f"must be in [1, patch_size={self.patch_size}], got {self.patch_offset}")
+        mn = self.patch_size**2 * (2 if self.layout == "2D" else 1)
+        _check(self.n_atoms >= 1, "n_atoms", f"must be >= 1, got {self.n_atoms}")
+        _check(self.dictionary == "dct" or self.n_atoms >= mn // 4, "n_atoms",
+               f"{self.n_atoms} atoms are too few to learn {mn}-element patches")
+        _check(self.omp_tolerance > 0, "omp_tolerance",
+               f"must be > 0, got {self.omp_tolerance}")
+        _check(self.omp_max_atoms >= 0, "omp_max_atoms",
+               f"must be >= 0, got {self.omp_max_atoms}")
+        _check(self.mod_iterations >= 1, "mod_iterations",
+               f"must be >= 1, got {self.mod_iterations}")
+        _check(self.mod_tolerance >= 0, "mod_tolerance",
+               f"must be >= 0, got {self.mod_tolerance}")
+        _check(self.mod_max_signals == 0 or self.mod_max_signals >= 100, "mod_max_signals",
+               f"must be 0 (all) or >= 100, got {self.mod_max_signals}")
+        _check(self.sparse_weight >= 0, "sparse_weight",
+               f"must be >= 0, got {self.sparse_weight}")
+        _check(0 < self.sparse_weight_decay <= 1, "sparse_weight_decay",
+               f"must be in (0, 1], got {self.sparse_weight_decay}")
+        _check(self.sparse_tv_weight > 0, "sparse_tv_weight",
+               f"must be > 0, got {self.sparse_tv_weight}")
+        _check(self.sparse_warps >= 0, "sparse_warps", f"must be >= 0, got {self.sparse_warps}")
+        _check(self.sparse_min_size >= self.patch_size, "sparse_min_size",
+               f"must be >= patch_size={self.patch_size}, got {self.sparse_min_size}")
+        _check(self.nesterov_iterations >= 1, "nesterov_iterations",
+               f"must be >= 1, got {self.nesterov_iterations}")
+        _check(1 <= self.nesterov_stages <= self.nesterov_iterations, "nesterov_stages",
+               f"must be in [1, nesterov_iterations], got {self.nesterov_stages}")
+        _check(self.smoothing_tv > 0, "smoothing_tv", f"must be > 0, got {self.smoothing_tv}")
+        _check(self.smoothing_data > 0, "smoothing_data",
+               f"must be > 0, got {self.smoothing_data}")
+
+    def sparse_active(self, shape: tuple[int, int]) -> bool:
+        """Whether a level of size ``shape`` runs the sparse stage."""
+        return self.sparse_warps > 0 and min(shape) >= self.sparse_min_size
+
+    def level_warps(self, shape: tuple[int, int]) -> int:
+        """TV-only warps, plus the sparse warps on levels large enough for patches."""
+        return self.n_warps + (self.sparse_warps if self.sparse_active(shape) else 0)
+
+
+@dataclass(frozen=True)
+class SparseDCTParams(SparseParams):
+    """Sparse TV-L1 with the fixed overcomplete DCT (``dictionary="dct"``)."""
+
+    dictionary: str = "dct"
+
+
+@dataclass(frozen=True)
+class Sparse1DParams(SparseParams):
+    """Sparse TV-L1, MOD-learned "1D" dictionary (one for u and v patches)."""
+
+    layout: str = "1D"
+
+
+@dataclass(frozen=True)
+class Sparse2x1DParams(SparseParams):
+    """Sparse TV-L1, MOD-learned "2x1D" dictionaries (one for u, one for v)."""
+
+    layout: str = "2x1D"
+
+
+@dataclass(frozen=True)
+class Sparse2DParams(SparseParams):
+    """Sparse TV-L1, MOD-learned "2D" dictionary (joint [u; v] patches)."""
+
+    layout: str = "2D"
+    n_atoms: int = 400
+
+
+# --------------------------------------------------------------------- dictionaries
+
+
+@lru_cache(maxsize=16)
+def _dct(layout: str, patch_size: int, n_atoms: int) -> tuple[np.ndarray, ...]:
+    dicts = layout_dct(layout, (patch_size, patch_size), n_atoms)
+    for d in dicts:
+        d.setflags(write=False)
+    return tuple(dicts)
+
+
+def _grid(shape: tuple[int, int], params: SparseParams) -> PatchGrid:
+    return PatchGrid(shape[0], shape[1], (params.patch_size, params.patch_size),
+                     params.patch_offset)
+
+
+def _problems(flow: np.ndarray, grid: PatchGrid, layout: str):
+    y = grid.extract(flow)
+    mask = grid.patch_mask(2) if grid.has_apron else None
+    return split_problems(layout, y, mask)
+
+
+def learn_dictionaries(
+    flow: np.ndarray, params: SparseParams, init: list[np.ndarray] | None = None
+) -> list[np.ndarray]:
+    """Learn (or refresh) the dictionaries of ``params.layout`` from a flow by MOD.
+
+    Parameters
+    ----------
+    flow : ndarray, shape (H, W, 2), float32
+    params : SparseParams
+    init : list of ndarray, optional
+        Starting dictionaries (the coarser level's); the overcomplete DCT if absent.
+
+    Returns
+    -------
+    list of ndarray
+        One ``(dim, n_atoms)`` float32 dictionary per problem of the layout (1 for
+        "1D" and "2D", 2 for "2x1D").
+    """
+    start = list(init) if init is not None else list(_dct(params.layout, params.patch_size,
+                                                          params.n_atoms))
+    grid = _grid(flow.shape[:2], params)
+    out = []
+    for (y, m), d0 in zip(_problems(flow, grid, params.layout), start, strict=True):
+        res = learn_mod(
+            y, d0, m,
+            tol=params.omp_tolerance,
+            max_atoms=params.omp_max_atoms or None,
+            n_iterations=params.mod_iterations,
+            rel_tol=params.mod_tolerance,
+            max_signals=params.mod_max_signals or None,
+            seed=params.seed,
+        )
+        out.append(res.dictionary)
+    return out
+
+
+def sparse_approximation(
+    flow: np.ndarray, dictionaries: list[np.ndarray], params: SparseParams
+) -> np.ndarray:
+    """``ū``: the average of the overlapping OMP approximations of the flow's patches.
+
+    Parameters
+    ----------
+    flow : ndarray, shape (H, W, 2), float32
+    dictionaries : list of ndarray
+        As returned by :func:`learn_dictionaries` (or the DCT of the layout).
+    params : SparseParams
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+    """
+    grid = _grid(flow.shape[:2], params)
+    parts = []
+    for (y, m), d in zip(_problems(flow, grid, params.layout), dictionaries, strict=True):
+        codes = omp(d, y, tol=params.omp_tolerance, max_atoms=params.omp_max_atoms or None,
+                    mask=m)
+        parts.append(reconstruct(d, codes))
+    approx = grid.average(merge_problems(params.layout, parts))
+    return np.ascontiguousarray(approx, dtype=np.float32)
+
+
+def coverage_weight(shape: tuple[int, int], params: SparseParams) -> np.ndarray:
+    """Patch coverage ``c(x)`` normalised by its mean ``m n / k²``, shape (H, W)."""
+    grid = _grid(shape, params)
+    density = params.patch_size**2 / params.patch_offset**2
+    return (grid.count / np.float32(density)).astype(np.float32)
+
+
+# --------------------------------------------------------------------- Nesterov
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _huber_dual_row(y, s, g, tens, i, mu, aniso):
+    """``s_k = D (g D∇y_k / max(μ, |D∇y_k|))`` for row ``i`` (both components)."""
+    h = y.shape[1]
+    w = y.shape[2]
+    cy = _F1 if i < h - 1 else _F0
+    ip = min(i + 1, h - 1)
+    gr = g[i]
+    t11r = tens[0, min(i, tens.shape[1] - 1)]
+    t12r = tens[1, min(i, tens.shape[1] - 1)]
+    t22r = tens[2, min(i, tens.shape[1] - 1)]
+    for k in range(2):
+        yc = y[k, i]
+        yn = y[k, ip]
+        sx = s[2 * k, i]
+        sy = s[2 * k + 1, i]
+        for j in range(w):
+            gx = yc[min(j + 1, w - 1)] - yc[j]
+            gy = cy * (yn[j] - yc[j])
+            if aniso:
+                t11 = t11r[j]
+                t12 = t12r[j]
+                t22 = t22r[j]
+                ax = t11 * gx + t12 * gy
+                gy = t12 * gx + t22 * gy
+                gx = ax
+            sc = gr[j] / max(mu, math.sqrt(gx * gx + gy * gy))
+            gx *= sc
+            gy *= sc
+            if aniso:
+                ax = t11 * gx + t12 * gy
+                gy = t12 * gx + t22 * gy
+                gx = ax
+            sx[j] = gx
+            sy[j] = gy
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d):
+    """Gradient step ``u = y − P⁻¹ ∇E(y)`` for row ``i``."""
+    nc = a.shape[0]
+    h = y.shape[1]
+    w = y.shape[2]
+    cm = _F1 if i > 0 else _F0
+    im = max(i - 1, 0)
+    cy = _F1 if i < h - 1 else _F0
+    inv_mu = _F1 / mu_d
+    for j in range(w):
+        y1 = y[0, i, j]
+        y2 = y[1, i, j]
+        g1 = _F0
+        g2 = _F0
+        for c in range(nc):
+            gx = ix[c, i, j]
+            gy = iy[c, i, j]
+            r = (a[c, i, j] + gx * y1 + gy * y2) * inv_mu
+            r = min(max(r, -_F1), _F1)
+            g1 += gx * r
+            g2 += gy * r
+        g1 *= lam
+        g2 *= lam
+        ws = 2 * wsp[i, j]
+        g1 += ws * (y1 - ubar[0, i, j])
+        g2 += ws * (y2 - ubar[1, i, j])
+        for k in range(2):
+            sx = s[2 * k, i]
+            sy = s[2 * k + 1, i]
+            sym = s[2 * k + 1, im]
+            # div: backward differences, the last column / row x / y parts ignored
+            if j == 0:
+                dv = sx[0]
+            elif j == w - 1:
+                dv = -sx[w - 2]
+            else:
+                dv = sx[j] - sx[j - 1]
+            dv += cy * sy[j] - cm * sym[j]
+            if k == 0:
+                g1 -= lam_tv * dv
+            else:
+                g2 -= lam_tv * dv
+        u[0, i, j] = y1 - pinv[i, j] * g1
+        u[1, i, j] = y2 - pinv[i, j] * g2
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def nesterov_iterations(ix, iy, a, g, tens, aniso, ubar, wsp, u, lam, lam_tv, mu_t_seq,
+                        mu_d_seq, n_iter, blocks):
+    """Preconditioned Nesterov iterations on the smoothed combined energy (in place on u).
+
+    Minimises :func:`smoothed_energy` with continuation: ``mu_t_seq`` and
+    ``mu_d_seq`` hold the smoothing of each stage (the last is the target); each
+    stage runs ``n_iter`` iterations from the previous stage's result with the
+    momentum restarted.  The step is the diagonal majorant
+    ``P = λ Σ_c |∇I_c|²/μ_d + 8 λ_TV/μ_TV + 2 w_SP`` (Gershgorin bound of the
+    Hessian), so the method is Nesterov's for a 1-smooth function in the P-norm.
+
+    Parameters
+    ----------
+    ix, iy, a : (C, H, W) float32
+        Linearised data term ``ρ_c(u) = a_c + ix_c u_1 + iy_c u_2`` (planar).
+    g : (H, W) float32
+        TV edge weight.
+    tens : (3, H, W) float32
+        Tensor (D11, D12, D22) if ``aniso``, else any (3, 1, 1) array.
+    aniso : bool
+    ubar : (2, H, W) float32
+        Sparse approximation ``ū``.
+    wsp : (H, W) float32
+        Sparse weight λ_SP·c(x) (normalised coverage).
+    u : (2, H, W) float32
+        Initial flow, overwritten with the result.
+    lam, lam_tv : float
+        λ and λ_TV.
+    mu_t_seq, mu_d_seq : (S,) float32
+        Smoothing per continuation stage.
+    n_iter : int
+        Iterations per stage.
+    blocks : (n+1,) int64
+        Row blocks for the parallel loops.
+    """
+    nc, h, w = a.shape
+    n_blk = blocks.shape[0] - 1
+    y = np.empty_like(u)
+    up = np.empty_like(u)
+    s = np.empty((4, h, w), np.float32)
+    pinv = np.empty((h, w), np.float32)
+    for st in range(mu_t_seq.shape[0]):
+        mu_t = mu_t_seq[st]
+        mu_d = mu_d_seq[st]
+        for b in nb.prange(n_blk):
+            for i in range(blocks[b], blocks[b + 1]):
+                for j in range(w):
+                    nn = _F0
+                    for c in range(nc):
+                        nn += ix[c, i, j] * ix[c, i, j] + iy[c, i, j] * iy[c, i, j]
+                    pinv[i, j] = _F1 / (lam * nn / mu_d + 8 * lam_tv / mu_t + 2 * wsp[i, j])
+                    up[0, i, j] = u[0, i, j]
+                    up[1, i, j] = u[1, i, j]
+        for it in range(n_iter):
+            beta = np.float32(it / (it + 3.0))
+            for b in nb.prange(n_blk):
+                for i in range(blocks[b], blocks[b + 1]):
+                    for k in range(2):
+                        ur = u[k, i]
+                        upr = up[k, i]
+                        yr = y[k, i]
+                        for j in range(w):
+                            un = ur[j]
+                            yr[j] = un + beta * (un - upr[j])
+                            upr[j] = un
+            for b in nb.prange(n_blk):
+                for i in range(blocks[b], blocks[b + 1]):
+                    _huber_dual_row(y, s, g, tens, i, mu_t, aniso)
+            for b in nb.prange(n_blk):
+                for i in range(blocks[b], blocks[b + 1]):
+                    _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d)
+
+
+def _tensor_matrices(tens):
+    return np.stack([np.stack([tens[0], tens[1]], -1), np.stack([tens[1], tens[2]], -1)], -2)
+
+
+def smoothed_energy(u, ix, iy, a, g, tens, aniso, ubar, wsp, lam, lam_tv, mu_t, mu_d) -> float:
+    """The smoothed combined energy that :func:`nesterov_iterations` minimises.
+
+    ``E = λ Σ_c h_μd(ρ_c(u)) + λ_TV Σ_k Σ_x g h_μt(|D ∇u_k|) + Σ_x w_SP |u − ū|²`` with
+    the Huber function ``h_μ(r) = r²/(2μ)`` for ``|r| ≤ μ``, ``|r| − μ/2`` otherwise.
+    Arguments are planar as in :func:`nesterov_iterations`.
+    """
+
+    def huber(r, mu):
+        r = np.abs(r)
+        return np.where(r <= mu, r * r / (2 * mu), r - mu / 2)
+
+    u = np.asarray(u, np.float64)
+    rho = a + ix * u[0] + iy * u[1]
+    e = lam * huber(rho, mu_d).sum()
+    for k in range(2):
+        q = gradient(u[k])
+        if aniso:
+            q = np.einsum("hwab,hwb->hwa", _tensor_matrices(tens), q)
+        e += lam_tv * (g * huber(np.sqrt((q * q).sum(-1)), mu_t)).sum()
+    e += (wsp * ((u - ubar) ** 2).sum(0)).sum()
+    return float(e)
+
+
+def nesterov_iterations_numpy(ix, iy, a, g, tens, aniso, ubar, wsp, u, lam, lam_tv, mu_t_seq,
+                              mu_d_seq, n_iter, blocks=None):
+    """NumPy reference of :func:`nesterov_iterations` (same arguments, in place on u)."""
+    T = _tensor_matrices(tens) if aniso else None
+    for mu_t, mu_d in zip(mu_t_seq, mu_d_seq, strict=True):
+        pinv = 1.0 / (lam * (ix * ix + iy * iy).sum(0) / mu_d + 8 * lam_tv / mu_t + 2 * wsp)
+        up = u.copy()
+        for it in range(n_iter):
+            beta = np.float32(it / (it + 3.0))
+            y = u + beta * (u - up)
+            up = u.copy()
+            r = np.clip((a + ix * y[0] + iy * y[1]) / mu_d, -1.0, 1.0)
+            grad = lam * np.stack([(ix * r).sum(0), (iy * r).sum(0)])
+            grad += 2 * wsp * (y - ubar)
+            for k in range(2):
+                q = gradient(y[k])
+                if aniso:
+                    q = np.einsum("hwab,hwb->hwa", T, q)
+                sk = g[..., None] * q / np.maximum(mu_t, np.sqrt((q * q).sum(-1)))[..., None]
+                if aniso:
+                    sk = np.einsum("hwab,hwb->hwa", T, sk)
+                grad[k] -= lam_tv * divergence(sk)
+            u[...] = (y - pinv * grad).astype(np.float32)
+
+
+def _continuation(mu: float, stages: int) -> np.ndarray:
+    return np.array([mu * 4.0 ** (stages - 1 - s) for s in range(stages)], np.float32)
+
+
+# --------------------------------------------------------------------- the solver
+
+
+def _init_level(I0, params: SparseParams, state: dict) -> None:
+    g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
+    tens = None
+    if params.regulariser == "tensor":
+        tens = diffusion_tensor(I0, params.tensor_a, params.tensor_b, params.tensor_sigma,
+                                params.edge_weight_min)
+    init_level_state(state, I0.shape, g, tens)
+
+
+def solve_warp(
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseParams, state: dict,
+    engine: str = "numba",
+):
+    """Single-level, single-warp solver of sparse-regularised TV-L1 (driver plug-in).
+
+    Warps ``0 … n_warps-1`` of a level run TV-L1 (isotropic or tensor); on levels
+    where :meth:`SparseParams.sparse_active` holds, the following ``sparse_warps``
+    learn the dictionaries (first sparse warp), code the current flow and minimise
+    the combined energy with Nesterov's method.  Arguments as in
+    :func:`varflow.twoframe.tvl1.solve_warp`.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+    """
+    if "g" not in state:
+        _init_level(I0, params, state)
+    if state.get("warp", 0) < params.n_warps or not params.sparse_active(I0.shape[:2]):
+        return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
+
+    stats = state.get("stats", {})
+    t0 = time.perf_counter()
+    if "dictionaries" not in state:
+        prev = (state.get("previous") or {}).get("dictionaries")
+        if params.dictionary == "dct":
+            state["dictionaries"] = list(_dct(params.layout, params.patch_size, params.n_atoms))
+        else:
+            state["dictionaries"] = learn_dictionaries(flow0, params, prev)
+        state["coverage"] = coverage_weight(I0.shape[:2], params)
+    ubar = sparse_approximation(flow0, state["dictionaries"], params)
+    t1 = time.perf_counter()
+
+    lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.get("level", 0)
+    ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
+    u = planar(flow0)
+    tens = state["tensor"]
+    aniso = tens is not None
+    if not aniso:
+        tens = np.zeros((3, 1, 1), np.float32)
+    stages = params.nesterov_stages
+    args = (
+        ix, iy, a, state["g"], tens, aniso, planar(ubar),
+        (np.float32(lam_sp) * state["coverage"]).astype(np.float32), u,
+        np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
+        _continuation(params.smoothing_tv, stages), _continuation(params.smoothing_data, stages),
+        max(1, params.nesterov_iterations // stages),
+    )
+    if engine == "numba":
+        nesterov_iterations(*args, _row_blocks(I0.shape[0]))
+    elif engine == "numpy":
+        nesterov_iterations_numpy(*args)
+    else:
+        raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
+    t2 = time.perf_counter()
+    stats["sparse_seconds"] = stats.get("sparse_seconds", 0.0) + (t1 - t0)
+    stats["nesterov_seconds"] = stats.get("nesterov_seconds", 0.0) + (t2 - t1)
+    stats["sparse_warps"] = stats.get("sparse_warps", 0) + 1
+    return np.ascontiguousarray(np.moveaxis(u, 0, -1))
