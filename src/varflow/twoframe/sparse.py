@@ -362,80 +362,92 @@ def _huber_dual_row(y, s, g, tens, i, mu, aniso):
     cy = _F1 if i < h - 1 else _F0
     ip = min(i + 1, h - 1)
     gr = g[i]
-    t11r = tens[0, min(i, tens.shape[1] - 1)]
-    t12r = tens[1, min(i, tens.shape[1] - 1)]
-    t22r = tens[2, min(i, tens.shape[1] - 1)]
     for k in range(2):
         yc = y[k, i]
         yn = y[k, ip]
         sx = s[2 * k, i]
         sy = s[2 * k + 1, i]
-        for j in range(w):
-            gx = yc[min(j + 1, w - 1)] - yc[j]
-            gy = cy * (yn[j] - yc[j])
-            if aniso:
+        if not aniso:
+            for j in range(w):
+                gx = yc[min(j + 1, w - 1)] - yc[j]
+                gy = cy * (yn[j] - yc[j])
+                sc = gr[j] / max(mu, math.sqrt(gx * gx + gy * gy))
+                sx[j] = gx * sc
+                sy[j] = gy * sc
+        else:
+            t11r = tens[0, i]
+            t12r = tens[1, i]
+            t22r = tens[2, i]
+            for j in range(w):
+                dx = yc[min(j + 1, w - 1)] - yc[j]
+                dy = cy * (yn[j] - yc[j])
                 t11 = t11r[j]
                 t12 = t12r[j]
                 t22 = t22r[j]
-                ax = t11 * gx + t12 * gy
-                gy = t12 * gx + t22 * gy
-                gx = ax
-            sc = gr[j] / max(mu, math.sqrt(gx * gx + gy * gy))
-            gx *= sc
-            gy *= sc
-            if aniso:
-                ax = t11 * gx + t12 * gy
-                gy = t12 * gx + t22 * gy
-                gx = ax
-            sx[j] = gx
-            sy[j] = gy
+                gx = t11 * dx + t12 * dy
+                gy = t12 * dx + t22 * dy
+                sc = gr[j] / max(mu, math.sqrt(gx * gx + gy * gy))
+                gx *= sc
+                gy *= sc
+                sx[j] = t11 * gx + t12 * gy
+                sy[j] = t12 * gx + t22 * gy
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d):
-    """Gradient step ``u = y − P⁻¹ ∇E(y)`` for row ``i``."""
+def _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d, g1, g2):
+    """Gradient step ``u = y − P⁻¹ ∇E(y)`` for row ``i`` (g1, g2: row work buffers).
+
+    Row views indexed by loop variables only, so that the loops vectorise (see
+    :mod:`varflow.twoframe.tvl1`).
+    """
     nc = a.shape[0]
     h = y.shape[1]
     w = y.shape[2]
-    cm = _F1 if i > 0 else _F0
+    cm = lam_tv if i > 0 else _F0
     im = max(i - 1, 0)
-    cy = _F1 if i < h - 1 else _F0
+    cy = lam_tv if i < h - 1 else _F0
     inv_mu = _F1 / mu_d
+    y1 = y[0, i]
+    y2 = y[1, i]
+    wr = wsp[i]
+    b1 = ubar[0, i]
+    b2 = ubar[1, i]
     for j in range(w):
-        y1 = y[0, i, j]
-        y2 = y[1, i, j]
-        g1 = _F0
-        g2 = _F0
-        for c in range(nc):
-            gx = ix[c, i, j]
-            gy = iy[c, i, j]
-            r = (a[c, i, j] + gx * y1 + gy * y2) * inv_mu
-            r = min(max(r, -_F1), _F1)
-            g1 += gx * r
-            g2 += gy * r
-        g1 *= lam
-        g2 *= lam
-        ws = 2 * wsp[i, j]
-        g1 += ws * (y1 - ubar[0, i, j])
-        g2 += ws * (y2 - ubar[1, i, j])
-        for k in range(2):
-            sx = s[2 * k, i]
-            sy = s[2 * k + 1, i]
-            sym = s[2 * k + 1, im]
-            # div: backward differences, the last column / row x / y parts ignored
-            if j == 0:
-                dv = sx[0]
-            elif j == w - 1:
-                dv = -sx[w - 2]
-            else:
-                dv = sx[j] - sx[j - 1]
-            dv += cy * sy[j] - cm * sym[j]
-            if k == 0:
-                g1 -= lam_tv * dv
-            else:
-                g2 -= lam_tv * dv
-        u[0, i, j] = y1 - pinv[i, j] * g1
-        u[1, i, j] = y2 - pinv[i, j] * g2
+        ws = 2 * wr[j]
+        g1[j] = ws * (y1[j] - b1[j])
+        g2[j] = ws * (y2[j] - b2[j])
+    for c in range(nc):
+        ixr = ix[c, i]
+        iyr = iy[c, i]
+        ar = a[c, i]
+        for j in range(w):
+            gx = ixr[j]
+            gy = iyr[j]
+            r = (ar[j] + gx * y1[j] + gy * y2[j]) * inv_mu
+            r = lam * min(max(r, -_F1), _F1)
+            g1[j] += gx * r
+            g2[j] += gy * r
+    for k in range(2):
+        gk = g1 if k == 0 else g2
+        sx = s[2 * k, i]
+        sy = s[2 * k + 1, i]
+        sym = s[2 * k + 1, im]
+        # -λ_TV div: backward differences, the last column / row x / y parts ignored
+        gk[0] -= lam_tv * sx[0]
+        gk[w - 1] += lam_tv * sx[w - 2]
+        sxc = sx[1 : w - 1]
+        sxl = sx[: w - 2]
+        gkc = gk[1 : w - 1]
+        for jj in range(w - 2):
+            gkc[jj] -= lam_tv * (sxc[jj] - sxl[jj])
+        for j in range(w):
+            gk[j] -= cy * sy[j] - cm * sym[j]
+    pr = pinv[i]
+    u1 = u[0, i]
+    u2 = u[1, i]
+    for j in range(w):
+        u1[j] = y1[j] - pr[j] * g1[j]
+        u2[j] = y2[j] - pr[j] * g2[j]
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
@@ -480,6 +492,7 @@ def nesterov_iterations(ix, iy, a, g, tens, aniso, ubar, wsp, u, lam, lam_tv, mu
     up = np.empty_like(u)
     s = np.empty((4, h, w), np.float32)
     pinv = np.empty((h, w), np.float32)
+    buf = np.empty((n_blk, 2, w), np.float32)
     for st in range(mu_t_seq.shape[0]):
         mu_t = mu_t_seq[st]
         mu_d = mu_d_seq[st]
@@ -509,7 +522,8 @@ def nesterov_iterations(ix, iy, a, g, tens, aniso, ubar, wsp, u, lam, lam_tv, mu
                     _huber_dual_row(y, s, g, tens, i, mu_t, aniso)
             for b in nb.prange(n_blk):
                 for i in range(blocks[b], blocks[b + 1]):
-                    _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d)
+                    _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d,
+                                  buf[b, 0], buf[b, 1])
 
 
 def _tensor_matrices(tens):
