@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .registry import METHODS, get_method, make_params
+from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
 from .twoframe.coarse_to_fine import ProgressCallback, coarse_to_fine
 
 __version__ = "0.1.0"
@@ -32,7 +32,11 @@ __version__ = "0.1.0"
 __all__ = [
     "__version__",
     "flow",
+    "track",
     "methods",
+    "track_methods",
+    "make_track_params",
+    "TRACKERS",
     "make_params",
     "METHODS",
     "read_flo",
@@ -53,6 +57,58 @@ __all__ = [
 def methods() -> list[str]:
     """Names of the registered two-frame methods (see :data:`varflow.registry.METHODS`)."""
     return sorted(METHODS)
+
+
+def track_methods() -> list[str]:
+    """Names of the registered trajectory methods (see :data:`varflow.registry.TRACKERS`)."""
+    return sorted(TRACKERS)
+
+
+def track(
+    frames: Any,
+    ref: int | None = None,
+    method: str = "chain",
+    *,
+    params: Any = None,
+    callback: ProgressCallback | None = None,
+    **overrides: Any,
+) -> np.ndarray:
+    """Dense trajectories of the reference frame's pixels through a sequence.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray or ndarray, shape (F, H, W) or (F, H, W, C)
+        uint8, uint16 or float in [0, 1]; F >= 2, all of one shape.
+    ref : int, optional
+        Index of the reference frame (negative counts from the end); the centre
+        frame ``F // 2`` by default.
+    method : str
+        A name from :func:`track_methods`.
+    params : dataclass, optional
+        A parameter object of the method.
+    callback : callable, optional
+        ``callback(done, total)`` as the work proceeds.
+    **overrides
+        Parameter fields to change.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+        ``traj[n, y, x]`` = displacement (u, v) of reference pixel ``(x, y)`` in frame
+        ``n``; ``traj[ref] == 0``.
+
+    Raises
+    ------
+    ValueError
+        Unknown method or parameter, invalid value, bad frames or ``ref``.
+    """
+    from .multiframe.track import check_frames, default_ref
+
+    m = get_tracker(method)
+    p = make_track_params(m, params, **overrides)
+    arr = check_frames(frames)
+    r = default_ref(arr.shape[0], ref)
+    return m.track(arr, r, p, callback)
 
 
 def flow(

@@ -31,14 +31,14 @@ import os
 import re
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
 from . import __version__
-from .registry import METHODS, get_method, make_params
+from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
 
 __all__ = ["main", "parameter_table"]
 
@@ -67,8 +67,11 @@ class _FieldDoc:
     meaning: str
 
 
-_SYMBOL = re.compile(r"^(?P<sym>[^\W\d_]{1,2}|[^\x00-\x7f]{1,2})(?:,\s+|\s+(?=of\b))(?P<rest>.*)$",
-                     re.S)
+_SYMBOL = re.compile(
+    r"^(?P<sym>(?:[^\W\d_]{1,2}|[^\x00-\x7f]{1,2})(?:_[A-Za-z]{1,4})?)"
+    r"(?:,\s+|\s+(?=of\b))(?P<rest>.*)$",
+    re.S,
+)
 
 
 def _is_header(lines: list[str], i: int) -> bool:
@@ -135,10 +138,10 @@ class _Param:
         return "--" + self.name.replace("_", "-")
 
 
-def _collect_params() -> dict[str, _Param]:
+def _collect_params(registry: Mapping[str, Any] = METHODS) -> dict[str, _Param]:
     """All scalar fields of all registered methods' parameter classes, in registry order."""
     params: dict[str, _Param] = {}
-    for mname, method in METHODS.items():
+    for mname, method in registry.items():
         docs = _field_docs(method.params)
         defaults = method.params()
         for f in dataclasses.fields(method.params):
@@ -154,7 +157,9 @@ def _collect_params() -> dict[str, _Param]:
     return params
 
 
-def _add_param_flags(parser: argparse.ArgumentParser, params: dict[str, _Param]) -> None:
+def _add_param_flags(
+    parser: argparse.ArgumentParser, params: dict[str, _Param], n_methods: int = len(METHODS)
+) -> None:
     group = parser.add_argument_group(
         "method parameters",
         "Fields of the methods' parameter dataclasses; only the flags you give are changed.",
@@ -162,7 +167,7 @@ def _add_param_flags(parser: argparse.ArgumentParser, params: dict[str, _Param])
     for p in params.values():
         meaning = p.doc.meaning if p.doc else ""
         sym = f" [{p.doc.symbol}]" if p.doc and p.doc.symbol else ""
-        owners = "" if len(p.owners) == len(METHODS) else f"; methods: {', '.join(p.owners)}"
+        owners = "" if len(p.owners) == n_methods else f"; methods: {', '.join(p.owners)}"
         text = f"{meaning}{sym} (default {p.default}{owners})".replace("%", "%%")
         kwargs: dict[str, Any] = {"dest": _PARAM_PREFIX + p.name, "default": argparse.SUPPRESS,
                                   "help": text}
@@ -190,7 +195,7 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     -------
     str
     """
-    m = get_method(method)
+    m = TRACKERS[method] if method in TRACKERS else get_method(method)
     docs = _field_docs(m.params)
     defaults = m.params()
     rows = []
@@ -424,16 +429,81 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_track(args: argparse.Namespace) -> int:
+    import varflow
+    from varflow.io import write_image
+    from varflow.io.trajectories import write_trajectories
+    from varflow.io.video import read_frames
+    from varflow.multiframe.track import check_frames, default_ref
+    from varflow.ops.warp import warp_bicubic
+    from varflow.viz import flow_to_color
+    from varflow.viz.plots import draw_trajectories
+
+    tracker = get_tracker(args.method)
+    given = _given_params(args)
+    own = {f.name for f in dataclasses.fields(tracker.params)}
+    for name in given:
+        if name not in own:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} is not a parameter of trajectory method {tracker.name!r}")
+    params = make_track_params(tracker, **given)
+    out = _check_output(args.output, (".npz",), "-o/--output")
+    plot = _check_output(args.plot, None, "--plot") if args.plot else None
+    dirs = {}
+    for flag, value in (("--warped", args.warped), ("--png", args.png)):
+        if value:
+            d = Path(value)
+            d.mkdir(parents=True, exist_ok=True)
+            dirs[flag] = d
+    max_radius = _max_radius(args.max_radius)
+
+    source = args.frames[0] if len(args.frames) == 1 else args.frames
+    raw = read_frames(source)
+    frames = check_frames(raw)
+    ref = default_ref(frames.shape[0], args.ref)
+    n_f, h, w = frames.shape[:3]
+    log.info("%d frames %dx%d, reference %d, method %s", n_f, w, h, ref, tracker.name)
+    t0 = time.perf_counter()
+    with _Progress(tracker.name, args.quiet, unit="step") as progress:
+        traj = varflow.track(frames, ref, tracker.name, params=params, callback=progress)
+    seconds = time.perf_counter() - t0
+    meta = {"method": tracker.name, "params": dataclasses.asdict(params),
+            "frames": [str(f) for f in args.frames], "seconds": seconds}
+    write_trajectories(out, traj, ref=ref, metadata=meta)
+    if "--warped" in dirs:
+        for n in range(n_f):
+            warped, _ = warp_bicubic(frames[n], traj[n])
+            write_image(dirs["--warped"] / f"warped_{n:04d}.png", _to_uint8(np.squeeze(warped)))
+    if "--png" in dirs:
+        radius = max_radius or float(_magnitude(traj.reshape(-1, 1, 2)).max() or 1.0)
+        for n in range(n_f):
+            write_image(dirs["--png"] / f"displacement_{n:04d}.png",
+                        flow_to_color(traj[n], max_radius=radius))
+    if plot is not None:
+        write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step))
+    mag = _magnitude(traj.reshape(-1, 1, 2))
+    print(f"{tracker.name}: {n_f} frames {w}x{h}, reference {ref}, in {seconds:.2f} s, "
+          f"max |displacement| {mag.max():.3f} px -> {out}")
+    for flag, d in dirs.items():
+        print(f"  {flag[2:]}: {d}")
+    if plot is not None:
+        print(f"  plot: {plot}")
+    return 0
+
+
 def _cmd_methods(args: argparse.Namespace) -> int:
-    width = max(len(n) for n in METHODS)
-    for name, m in METHODS.items():
-        print(f"{name:<{width}}  {m.description}")
-        if args.params:
-            if args.markdown:
-                print()
-            print(parameter_table(name, markdown=args.markdown))
-            if args.markdown:
-                print()
+    width = max(len(n) for n in (*METHODS, *TRACKERS))
+    for title, registry in (("two-frame flow (varflow flow --method)", METHODS),
+                            ("trajectories (varflow track --method)", TRACKERS)):
+        print(f"# {title}")
+        for name, m in registry.items():
+            print(f"{name:<{width}}  {m.description}")
+            if args.params:
+                if args.markdown:
+                    print()
+                print(parameter_table(name, markdown=args.markdown))
+                if args.markdown:
+                    print()
     return 0
 
 
@@ -522,6 +592,32 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (default ./varflow-demo)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_demo)
+
+    tparams = _collect_params(TRACKERS)
+    p = sub.add_parser("track", parents=[common], help="dense trajectories through a sequence",
+                       description="Track every pixel of a reference frame through a sequence "
+                       "(frames as files, a directory or a video).")
+    p.add_argument("frames", nargs="+", metavar="FRAME",
+                   help="image files in order, or one directory of images or video file")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.npz",
+                   help="trajectories (F, H, W, 2), the reference index and metadata")
+    p.add_argument("--ref", type=int, default=None, metavar="K",
+                   help="reference frame index (default: the centre frame)")
+    p.add_argument("--method", default="chain", metavar="NAME",
+                   help=f"one of: {', '.join(TRACKERS)} (default chain)")
+    p.add_argument("--warped", metavar="DIR", help="write every frame warped back to the "
+                   "reference (warped_NNNN.png)")
+    p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
+                   "frame (displacement_NNNN.png, one colour scale)")
+    p.add_argument("--plot", metavar="PLOT.png",
+                   help="draw sampled trajectories over the reference frame")
+    p.add_argument("--plot-step", type=int, default=16, metavar="PX",
+                   help="grid step of the plotted trajectories (default 16)")
+    p.add_argument("--max-radius", type=float, metavar="R",
+                   help="displacement of full colour saturation for --png (default: maximum)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(p, tparams, n_methods=len(TRACKERS))
+    p.set_defaults(func=_cmd_track)
 
     p = sub.add_parser("methods", parents=[common], help="list the methods",
                        description="List the registered methods.")

@@ -1,8 +1,10 @@
-"""The method registry: one plain dict that the API, the CLI and the benchmarks read.
+"""The method registries: plain dicts that the API, the CLI and the benchmarks read.
 
-Each entry maps a method name to a :class:`Method`: its frozen parameter dataclass,
-its single-level warp solver (plugged into
+:data:`METHODS` maps a two-frame method name to a :class:`Method`: its frozen
+parameter dataclass, its single-level warp solver (plugged into
 :func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`) and a one-line description.
+:data:`TRACKERS` maps a multi-frame (trajectory) method name to a :class:`Tracker`:
+its parameter dataclass and its ``track(frames, ref, params, callback)`` function.
 """
 
 from __future__ import annotations
@@ -11,12 +13,22 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .multiframe import track as _track
 from .twoframe import sparse as _sparse
 from .twoframe import tensor as _tensor
 from .twoframe import tvl1 as _tvl1
 from .twoframe.coarse_to_fine import CoarseToFineParams, WarpSolver
 
-__all__ = ["Method", "METHODS", "get_method", "make_params"]
+__all__ = [
+    "Method",
+    "METHODS",
+    "Tracker",
+    "TRACKERS",
+    "get_method",
+    "get_tracker",
+    "make_params",
+    "make_track_params",
+]
 
 
 @dataclass(frozen=True)
@@ -79,6 +91,53 @@ METHODS: dict[str, Method] = {
 }
 
 
+@dataclass(frozen=True)
+class Tracker:
+    """A registered multi-frame (trajectory) method.
+
+    Attributes
+    ----------
+    name : str
+    params : type
+        Frozen dataclass of its parameters.
+    track : callable
+        ``track(frames, ref, params, callback) -> (F, H, W, 2)`` with ``frames`` as
+        returned by :func:`varflow.multiframe.track.check_frames`.
+    description : str
+    """
+
+    name: str
+    params: type
+    track: Any
+    description: str
+
+
+TRACKERS: dict[str, Tracker] = {
+    "twoframe": Tracker(
+        name="twoframe",
+        params=_track.TwoFrameTrackParams,
+        track=_track.track_twoframe,
+        description="independent TV-L1 flows from the reference to every frame",
+    ),
+    "chain": Tracker(
+        name="chain",
+        params=_track.ChainTrackParams,
+        track=_track.track_chain,
+        description="TV-L1 flows between consecutive frames, composed along the trajectory",
+    ),
+}
+
+
+def get_tracker(name: str) -> Tracker:
+    """Look a trajectory method up by name; unknown names raise ``ValueError``."""
+    try:
+        return TRACKERS[name]
+    except KeyError:
+        raise ValueError(
+            f"method: unknown trajectory method {name!r}; available: {', '.join(TRACKERS)}"
+        ) from None
+
+
 def get_method(name: str) -> Method:
     """Look a method up by name; unknown names raise ``ValueError`` listing the choices."""
     try:
@@ -98,6 +157,16 @@ def make_params(method: str | Method, params: Any = None, **overrides: Any) -> C
         For an unknown field name (named in the message) or an invalid value.
     """
     m = get_method(method) if isinstance(method, str) else method
+    return _make(m, params, **overrides)
+
+
+def make_track_params(method: str | Tracker, params: Any = None, **overrides: Any) -> Any:
+    """:func:`make_params` for a trajectory method of :data:`TRACKERS`."""
+    m = get_tracker(method) if isinstance(method, str) else method
+    return _make(m, params, **overrides)
+
+
+def _make(m: Method | Tracker, params: Any, **overrides: Any) -> Any:
     base = params if params is not None else m.params()
     if not isinstance(base, m.params):
         raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")

@@ -1,0 +1,187 @@
+"""Dense trajectories from two-frame flows: the ``twoframe`` and ``chain`` baselines.
+
+A trajectory array ``traj`` of shape ``(F, H, W, 2)`` holds, for every pixel ``x`` of
+the reference frame ``ref``, its displacement in frame ``n``: the point seen at ``x``
+in frame ``ref`` is at ``x + traj[n, x]`` in frame ``n`` (``traj[ref] = 0``).
+
+* ``twoframe`` — independent two-frame flows from the reference to every frame:
+  ``traj[n] = flow(I_ref, I_n)``.  Far frames need large displacements, which the
+  coarse-to-fine pyramid handles up to a point.
+* ``chain`` — flows between consecutive frames composed along the trajectory
+  (Gibson & Marques 2016, ch. 4): ``traj[n] = traj[n−1] + f_{n−1→n}(x + traj[n−1])``
+  for ``n > ref`` and symmetrically with ``f_{n+1→n}`` for ``n < ref``; each flow is
+  sampled (bicubic) at the current position.  Errors accumulate (drift), but every
+  flow is small.
+
+Both use a registered two-frame method (``tvl1`` by default) with its parameters.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_float_image
+from ..ops.warp import warp_bicubic
+from ..twoframe.coarse_to_fine import _check
+from ..twoframe.tvl1 import TVL1Params, tvl1
+
+__all__ = [
+    "TrackCallback",
+    "TwoFrameTrackParams",
+    "ChainTrackParams",
+    "check_frames",
+    "default_ref",
+    "track_twoframe",
+    "track_chain",
+    "compose",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``callback(done, total)`` after every unit of work (a flow, a level...).
+TrackCallback = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class TwoFrameTrackParams(TVL1Params):
+    """Parameters of the ``twoframe`` tracker: TV-L1 from the reference to every frame.
+
+    All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.
+    """
+
+
+@dataclass(frozen=True)
+class ChainTrackParams(TVL1Params):
+    """Parameters of the ``chain`` tracker: TV-L1 between consecutive frames, composed.
+
+    All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.
+    """
+
+
+def check_frames(frames: Any) -> np.ndarray:
+    """Validate a frame sequence and convert it to ``(F, H, W, C)`` float32 in [0, 1].
+
+    Parameters
+    ----------
+    frames : sequence of ndarray or ndarray, shape (F, H, W) or (F, H, W, C)
+        uint8, uint16 or float in [0, 1]; all of one shape.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, C), float32
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 frames, frames of different shapes, or a bad frame (named by index).
+    """
+    if isinstance(frames, np.ndarray):
+        if frames.ndim not in (3, 4):
+            raise ValueError(f"frames: expected shape (F, H, W[, C]), got {frames.shape}")
+        seq: Sequence[Any] = list(frames)
+    else:
+        try:
+            seq = list(frames)
+        except TypeError:
+            raise ValueError("frames: expected a sequence of images or an array") from None
+    if len(seq) < 2:
+        raise ValueError(f"frames: need at least 2 frames, got {len(seq)}")
+    out = [as_float_image(f, f"frames[{i}]") for i, f in enumerate(seq)]
+    for i, f in enumerate(out):
+        if f.shape != out[0].shape:
+            raise ValueError(
+                f"frames[{i}]: shape {f.shape[:2] + f.shape[2:]} differs from frames[0] "
+                f"{out[0].shape}"
+            )
+    return np.stack(out)
+
+
+def default_ref(n_frames: int, ref: int | None) -> int:
+    """The reference index: ``ref`` checked against ``n_frames``, or the centre frame."""
+    if ref is None:
+        return n_frames // 2
+    if isinstance(ref, bool) or not isinstance(ref, int | np.integer):
+        raise ValueError(f"ref: expected an integer frame index, got {ref!r}")
+    if ref < 0:
+        ref += n_frames
+    _check(0 <= ref < n_frames, "ref", f"must index one of the {n_frames} frames, got {ref}")
+    return int(ref)
+
+
+def _progress(callback: TrackCallback | None, done: int, total: int) -> None:
+    if callback is not None:
+        callback(done, total)
+
+
+def track_twoframe(
+    frames: np.ndarray, ref: int, params: TVL1Params, callback: TrackCallback | None = None
+) -> np.ndarray:
+    """Trajectories as independent TV-L1 flows from the reference to every frame.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W, C), float32
+        From :func:`check_frames`.
+    ref : int
+    params : TVL1Params
+    callback : callable, optional
+        ``callback(done, total)`` after each flow.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+    """
+    f, h, w = frames.shape[:3]
+    traj = np.zeros((f, h, w, 2), np.float32)
+    todo = [n for n in range(f) if n != ref]
+    for i, n in enumerate(todo):
+        traj[n] = tvl1(frames[ref], frames[n], params)
+        _progress(callback, i + 1, len(todo))
+    return traj
+
+
+def compose(traj_prev: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """One chaining step: ``traj_prev + flow(x + traj_prev)`` (bicubic sampling of ``flow``).
+
+    Parameters
+    ----------
+    traj_prev : ndarray, shape (H, W, 2)
+        Displacements of the reference pixels in frame ``m``.
+    flow : ndarray, shape (H, W, 2)
+        Flow from frame ``m`` to frame ``n``.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+        Displacements in frame ``n``; positions outside frame ``m`` sample its border
+        (replicated), so the trajectory continues with the nearest flow.
+    """
+    sampled, _ = warp_bicubic(np.ascontiguousarray(flow, np.float32), traj_prev)
+    return (traj_prev + sampled).astype(np.float32)
+
+
+def track_chain(
+    frames: np.ndarray, ref: int, params: TVL1Params, callback: TrackCallback | None = None
+) -> np.ndarray:
+    """Trajectories by composing consecutive TV-L1 flows outwards from the reference.
+
+    Arguments and result as in :func:`track_twoframe`.
+    """
+    f, h, w = frames.shape[:3]
+    traj = np.zeros((f, h, w, 2), np.float32)
+    total = f - 1
+    done = 0
+    for n in range(ref + 1, f):
+        traj[n] = compose(traj[n - 1], tvl1(frames[n - 1], frames[n], params))
+        done += 1
+        _progress(callback, done, total)
+    for n in range(ref - 1, -1, -1):
+        traj[n] = compose(traj[n + 1], tvl1(frames[n + 1], frames[n], params))
+        done += 1
+        _progress(callback, done, total)
+    return traj
