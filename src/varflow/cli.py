@@ -181,6 +181,17 @@ def _given_params(args: argparse.Namespace) -> dict[str, Any]:
     return {k[len(_PARAM_PREFIX):]: v for k, v in vars(args).items() if k.startswith(_PARAM_PREFIX)}
 
 
+def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, Any]:
+    """The parameter flags given on the command line; each must be a field of ``entry``."""
+    given = _given_params(args)
+    own = {f.name for f in dataclasses.fields(entry.params)}
+    for name in given:
+        if name not in own:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} is not a parameter of {kind} {entry.name!r}")
+    return given
+
+
 def parameter_table(method: str, markdown: bool = False) -> str:
     """Table of a method's parameters: name, CLI flag, paper symbol, default, meaning.
 
@@ -289,13 +300,7 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     from varflow.viz import flow_to_color
 
     method = get_method(args.method)
-    given = _given_params(args)
-    own = {f.name for f in dataclasses.fields(method.params)}
-    for name in given:
-        if name not in own:
-            flag = "--" + name.replace("_", "-")
-            raise ValueError(f"{flag} is not a parameter of method {method.name!r}")
-    params = make_params(method, **given)
+    params = make_params(method, **_own_params(args, method, "method"))
     max_radius = _max_radius(args.max_radius)
     out = _check_output(args.output, (".flo", ".png"), "-o/--output")
     png = _check_output(args.png, None, "--png") if args.png else None
@@ -440,13 +445,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from varflow.viz.plots import draw_trajectories
 
     tracker = get_tracker(args.method)
-    given = _given_params(args)
-    own = {f.name for f in dataclasses.fields(tracker.params)}
-    for name in given:
-        if name not in own:
-            flag = "--" + name.replace("_", "-")
-            raise ValueError(f"{flag} is not a parameter of trajectory method {tracker.name!r}")
-    params = make_track_params(tracker, **given)
+    params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
     out = _check_output(args.output, (".npz",), "-o/--output")
     plot = _check_output(args.plot, None, "--plot") if args.plot else None
     dirs = {}
