@@ -413,3 +413,18 @@ def test_console_script_end_to_end(pair: dict, tmp_path: Path) -> None:
     )
     assert_one_line_error(bad.returncode, bad.stderr, "missing.flo")
     assert bad.stdout == ""
+
+
+def test_flags_of_another_method_are_rejected(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    from varflow.io import write_image
+
+    img = np.zeros((20, 24), np.uint8)
+    write_image(tmp_path / "a.png", img)
+    rc, _, err = run(capsys, "flow", str(tmp_path / "a.png"), str(tmp_path / "a.png"),
+                     "-o", str(tmp_path / "f.flo"), "--tensor-a", "3")
+    assert rc == 2 and "--tensor-a is not a parameter of method 'tvl1'" in err
+    rc, _, err = run(capsys, "track", str(tmp_path / "a.png"), str(tmp_path / "a.png"),
+                     "-o", str(tmp_path / "t.npz"), "--n-atoms", "400")
+    # trajectory methods only get the flags of trajectory parameter classes
+    assert rc == 2 and "unrecognized arguments: --n-atoms" in err and len(err.splitlines()) == 1
