@@ -113,3 +113,9 @@ def test_cli_track_errors_are_one_line(tmp_path, capsys):
     assert rc == 2 and err.startswith("varflow: error: ") and len(err.splitlines()) == 1
     rc = cli.main(["track", str(tmp_path), "-o", str(tmp_path / "t.txt")])
     assert rc == 2 and ".npz" in capsys.readouterr().err
+
+
+def test_top_level_exports_resolve():
+    for name in varflow.__all__:
+        assert getattr(varflow, name) is not None, name
+    assert {"twoframe", "chain"} <= set(varflow.track_methods())

@@ -4,12 +4,15 @@ Public API
 ----------
 flow(frame0, frame1, method="tvl1", **params)
     Dense flow ``(H, W, 2)`` float32 from ``frame0`` to ``frame1``.
-methods()
-    Names of the registered methods.
-read_flo / write_flo / read_kitti_png / write_kitti_png / read_image
+track(frames, ref=None, method="chain", **params)
+    Dense trajectories ``(F, H, W, 2)`` of the reference frame's pixels.
+methods() / track_methods()
+    Names of the registered two-frame / trajectory methods.
+read_flo / write_flo / read_kitti_png / write_kitti_png / read_image / read_frames /
+read_trajectories / write_trajectories
     File I/O.
-flow_to_color
-    Middlebury colour coding.
+flow_to_color / draw_trajectories
+    Middlebury colour coding; trajectories drawn over the reference frame.
 endpoint_error / angular_error / rms_endpoint_error / evaluate
     Metrics.
 
@@ -44,6 +47,10 @@ __all__ = [
     "read_kitti_png",
     "write_kitti_png",
     "read_image",
+    "read_frames",
+    "read_trajectories",
+    "write_trajectories",
+    "draw_trajectories",
     "read_flow",
     "write_flow",
     "flow_to_color",
@@ -169,6 +176,10 @@ def __getattr__(name: str) -> Any:
         "read_kitti_png": ("io.kitti_png", "read_kitti_png"),
         "write_kitti_png": ("io.kitti_png", "write_kitti_png"),
         "read_image": ("io.images", "read_image"),
+        "read_frames": ("io.video", "read_frames"),
+        "read_trajectories": ("io.trajectories", "read_trajectories"),
+        "write_trajectories": ("io.trajectories", "write_trajectories"),
+        "draw_trajectories": ("viz.plots", "draw_trajectories"),
         "read_flow": ("io.images", "read_flow"),
         "write_flow": ("io.images", "write_flow"),
         "flow_to_color": ("viz.colorwheel", "flow_to_color"),
