@@ -119,3 +119,33 @@ def test_top_level_exports_resolve():
     for name in varflow.__all__:
         assert getattr(varflow, name) is not None, name
     assert {"twoframe", "chain"} <= set(varflow.track_methods())
+
+
+def test_trajectory_benchmark_runner_and_table():
+    from varflow.evaluation.bench_trajectories import format_trajectory_table, run_trajectories
+
+    rows = run_trajectories(["twoframe", "chain"], n_frames=5, shape=(40, 48),
+                            scenes=["affine"], variants=["clean", "gaussian"], progress=False,
+                            overrides={"n_warps": 2})
+    assert [(r["variant"], r["method"]) for r in rows] == [
+        ("clean", "twoframe"), ("clean", "chain"), ("gaussian", "twoframe"),
+        ("gaussian", "chain")]
+    assert all(0 < r["epe"] <= r["rms"] for r in rows)
+    clean = {r["method"]: r["epe"] for r in rows if r["variant"] == "clean"}
+    noisy = {r["method"]: r["epe"] for r in rows if r["variant"] == "gaussian"}
+    assert all(noisy[m] > clean[m] for m in clean)  # noise costs accuracy
+    table = format_trajectory_table(rows)
+    ratio = [ln for ln in table.splitlines() if ln.startswith("| EPE ratio to twoframe")]
+    assert len(ratio) == 1 and "1.000" in ratio[0]
+    with pytest.raises(ValueError, match="no_such"):
+        run_trajectories(["chain"], overrides={"no_such": 1}, progress=False)
+
+
+def test_cli_bench_trajectories(capsys):
+    rc = cli.main(["bench", "trajectories", "--frames", "4", "--shape", "32x40",
+                   "--scenes", "affine", "--variants", "clean", "--methods", "chain", "-q"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "| affine" in out and "chain EPE" in out
+    rc = cli.main(["bench", "trajectories", "--shape", "big"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--shape" in err and len(err.splitlines()) == 1

@@ -530,6 +530,36 @@ def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench import write_csv
+    from varflow.evaluation.bench_trajectories import format_trajectory_table, run_trajectories
+
+    methods = _split_list(args.methods)
+    if not methods:
+        raise ValueError("--methods: give at least one trajectory method name")
+    for m in methods:
+        get_tracker(m)
+    try:
+        h, w = (int(v) for v in args.shape.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--shape: expected HxW, e.g. 96x128, got {args.shape!r}") from None
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    kw = {}
+    if args.scenes:
+        kw["scenes"] = _split_list(args.scenes)
+    if args.variants:
+        kw["variants"] = _split_list(args.variants)
+    rows = run_trajectories(methods, n_frames=args.frames, shape=(h, w),
+                            overrides=_given_params(args), progress=not args.quiet, **kw)
+    print(f"synthetic sequences, {args.frames} frames {w}x{h}, reference = centre; EPE / RMS "
+          "in pixels over visible points of all frames but the reference")
+    print(format_trajectory_table(rows))
+    if csv_path is not None:
+        write_csv(rows, csv_path)
+        print(f"wrote {csv_path}")
+    return 0
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -641,6 +671,22 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_param_flags(b, params)
     b.set_defaults(func=_cmd_bench_middlebury)
+
+    b = bsub.add_parser("trajectories", parents=[common],
+                        help="trajectory methods on the synthetic sequences",
+                        description="Trajectory EPE / RMS per scene and variant (book "
+                        "Table 4.2 layout) on sequences with exact ground truth.")
+    b.add_argument("--methods", default=",".join(TRACKERS), metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default all)")
+    b.add_argument("--frames", type=int, default=30, metavar="F", help="frames (default 30)")
+    b.add_argument("--shape", default="96x128", metavar="HxW", help="frame size (default 96x128)")
+    b.add_argument("--scenes", metavar="NAMES", help="subset: affine,nonrigid,layers")
+    b.add_argument("--variants", metavar="NAMES",
+                   help="subset: clean,gaussian,saltpepper,occluder")
+    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(b, tparams, n_methods=len(TRACKERS))
+    b.set_defaults(func=_cmd_bench_trajectories)
     return parser
 
 
