@@ -473,14 +473,14 @@ def _cmd_track(args: argparse.Namespace) -> int:
         for n in range(n_f):
             warped, _ = warp_bicubic(frames[n], traj[n])
             write_image(dirs["--warped"] / f"warped_{n:04d}.png", _to_uint8(np.squeeze(warped)))
+    mag = _magnitude(traj.reshape(-1, 1, 2))
     if "--png" in dirs:
-        radius = max_radius or float(_magnitude(traj.reshape(-1, 1, 2)).max() or 1.0)
+        radius = max_radius or float(mag.max() or 1.0)
         for n in range(n_f):
             write_image(dirs["--png"] / f"displacement_{n:04d}.png",
                         flow_to_color(traj[n], max_radius=radius))
     if plot is not None:
         write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step))
-    mag = _magnitude(traj.reshape(-1, 1, 2))
     print(f"{tracker.name}: {n_f} frames {w}x{h}, reference {ref}, in {seconds:.2f} s, "
           f"max |displacement| {mag.max():.3f} px -> {out}")
     for flag, d in dirs.items():

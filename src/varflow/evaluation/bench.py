@@ -51,7 +51,9 @@ CSV_FIELDS = ("sequence", "method", "aee", "aae", "seconds", "book_tv_aee", "boo
 
 
 def split_overrides(
-    methods: Sequence[str], overrides: Mapping[str, Any] | None
+    methods: Sequence[str],
+    overrides: Mapping[str, Any] | None,
+    registry: Mapping[str, Any] = METHODS,
 ) -> dict[str, dict[str, Any]]:
     """Distribute parameter overrides over methods.
 
@@ -62,6 +64,9 @@ def split_overrides(
     overrides : mapping, optional
         Either ``{field: value}``, applied to every listed method that has the field,
         or ``{method: {field: value}}`` per method (the two forms can be mixed).
+    registry : mapping
+        Where the methods are registered: :data:`~varflow.registry.METHODS` (default)
+        or :data:`~varflow.registry.TRACKERS`.
 
     Returns
     -------
@@ -76,10 +81,13 @@ def split_overrides(
     """
     import dataclasses
 
+    for m in methods:
+        if m not in registry:
+            raise ValueError(f"method: unknown method {m!r}; available: {', '.join(registry)}")
     out: dict[str, dict[str, Any]] = {m: {} for m in methods}
-    fields = {m: {f.name for f in dataclasses.fields(get_method(m).params)} for m in methods}
+    fields = {m: {f.name for f in dataclasses.fields(registry[m].params)} for m in methods}
     for key, value in (overrides or {}).items():
-        if key in METHODS and isinstance(value, Mapping):
+        if key in registry and isinstance(value, Mapping):
             if key not in out:
                 raise ValueError(f"overrides: method {key!r} is not among {', '.join(methods)}")
             out[key].update(value)

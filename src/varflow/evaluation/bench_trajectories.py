@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import get_tracker, make_track_params
+from ..registry import TRACKERS, get_tracker, make_track_params
+from .bench import split_overrides
 from .sequences import SCENES, VARIANTS, benchmark_suite
 from .trajectory_metrics import trajectory_errors
 
@@ -68,8 +69,6 @@ def run_trajectories(
     ValueError
         Unknown method, scene, variant or parameter.
     """
-    import dataclasses
-
     from tqdm import tqdm
 
     import varflow
@@ -77,16 +76,10 @@ def run_trajectories(
     methods = list(methods)
     if not methods:
         raise ValueError("methods: need at least one trajectory method")
-    params = {}
     for m in methods:
-        tracker = get_tracker(m)
-        own = {f.name for f in dataclasses.fields(tracker.params)}
-        params[m] = make_track_params(tracker, **{k: v for k, v in (overrides or {}).items()
-                                                  if k in own})
-    unknown = set(overrides or {}) - {f.name for m in methods
-                                      for f in dataclasses.fields(get_tracker(m).params)}
-    if unknown:
-        raise ValueError(f"{sorted(unknown)[0]}: not a parameter of {', '.join(methods)}")
+        get_tracker(m)
+    per_method = split_overrides(methods, overrides, registry=TRACKERS)
+    params = {m: make_track_params(m, **per_method[m]) for m in methods}
     rows: list[dict[str, Any]] = []
     n_rows = len(scenes) * len(variants)
     bar = tqdm(total=n_rows * len(methods), desc="trajectories", unit="run", file=sys.stderr,

@@ -63,8 +63,16 @@ from ..sparse import (
     split_problems,
 )
 from .coarse_to_fine import _check
-from .tensor import TensorParams, diffusion_tensor
-from .tvl1 import _row_blocks, edge_weight, init_level_state, linearise, planar, run_warp
+from .tensor import TensorParams, init_tensor_level
+from .tvl1 import (
+    _row_blocks,
+    edge_weight,
+    init_level_state,
+    kernel_tensor,
+    linearise,
+    planar,
+    run_warp,
+)
 
 __all__ = [
     "SparseParams",
@@ -589,12 +597,11 @@ def _continuation(mu: float, stages: int) -> np.ndarray:
 
 
 def _init_level(I0, params: SparseParams, state: dict) -> None:
-    g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
-    tens = None
     if params.regulariser == "tensor":
-        tens = diffusion_tensor(I0, params.tensor_a, params.tensor_b, params.tensor_sigma,
-                                params.edge_weight_min)
-    init_level_state(state, I0.shape, g, tens)
+        init_tensor_level(I0, params, state)
+    else:
+        init_level_state(state, I0.shape, edge_weight(I0, params.edge_weight,
+                                                      params.edge_weight_min))
 
 
 def solve_warp(
@@ -633,10 +640,7 @@ def solve_warp(
     lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.get("level", 0)
     ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
     u = planar(flow0)
-    tens = state["tensor"]
-    aniso = tens is not None
-    if not aniso:
-        tens = np.zeros((3, 1, 1), np.float32)
+    tens, aniso = kernel_tensor(state)
     stages = params.nesterov_stages
     args = (
         ix, iy, a, state["g"], tens, aniso, planar(ubar),

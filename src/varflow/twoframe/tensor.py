@@ -34,7 +34,7 @@ from ..ops.differences import image_derivatives
 from .coarse_to_fine import _check
 from .tvl1 import TVL1Params, edge_weight, init_level_state, run_warp
 
-__all__ = ["TensorParams", "diffusion_tensor", "solve_warp"]
+__all__ = ["TensorParams", "diffusion_tensor", "init_tensor_level", "solve_warp"]
 
 
 @dataclass(frozen=True)
@@ -125,6 +125,14 @@ def diffusion_tensor(
     return out
 
 
+def init_tensor_level(I0: np.ndarray, params: TensorParams, state: dict) -> None:
+    """Per-level state of tensor-directed TV-L1: edge weight, tensor ``D`` and duals."""
+    g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
+    tens = diffusion_tensor(I0, params.tensor_a, params.tensor_b, params.tensor_sigma,
+                            params.edge_weight_min)
+    init_level_state(state, I0.shape, g, tens)
+
+
 def solve_warp(
     I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TensorParams, state: dict,
     engine: str = "numba",
@@ -139,8 +147,5 @@ def solve_warp(
     ndarray, shape (H, W, 2), float32
     """
     if "g" not in state:
-        g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
-        tens = diffusion_tensor(I0, params.tensor_a, params.tensor_b, params.tensor_sigma,
-                                params.edge_weight_min)
-        init_level_state(state, I0.shape, g, tens)
+        init_tensor_level(I0, params, state)
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)

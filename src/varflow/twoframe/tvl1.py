@@ -448,6 +448,19 @@ def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
     return planar(ixh), planar(iyh), planar(ah)
 
 
+_NO_TENSOR = np.zeros((3, 1, 1), np.float32)
+
+
+def kernel_tensor(state: dict) -> tuple[np.ndarray, bool]:
+    """``(tensor, aniso)`` arguments of the kernels from the level state.
+
+    The kernels need an array even for isotropic TV: a (3, 1, 1) placeholder that
+    they never read.
+    """
+    tens = state["tensor"]
+    return (_NO_TENSOR, False) if tens is None else (tens, True)
+
+
 def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict,
              engine: str = "numba") -> np.ndarray:
     """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
@@ -460,10 +473,7 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
     u = planar(flow0)
-    tens = state["tensor"]
-    aniso = tens is not None
-    if not aniso:
-        tens = np.zeros((3, 1, 1), np.float32)
+    tens, aniso = kernel_tensor(state)
     args = (
         ix, iy, a, state["g"], tens, u, state["p"], state["tp"], state["q"],
         np.float32(params.data_weight), np.float32(params.coupling), np.float32(params.tv_step),
