@@ -126,7 +126,8 @@ _BAD = {
     "mod_iterations": 0, "mod_tolerance": -1.0, "mod_max_signals": 10, "sparse_weight": -1.0,
     "sparse_weight_decay": 1.5, "sparse_tv_weight": 0.0, "sparse_warps": -1,
     "sparse_min_size": 5, "nesterov_iterations": 0, "nesterov_stages": 0,
-    "smoothing_tv": 0.0, "smoothing_data": 0.0,
+    "smoothing_tv": 0.0, "smoothing_data": 0.0, "combined_solver": "admm", "combined_coupling": 0.0,
+    "combined_iterations": 0, "combined_tolerance": -1.0,
 }
 
 
