@@ -10,6 +10,8 @@ Synopsis::
     varflow methods [--params] [--markdown]
     varflow bench middlebury [--data DIR] [--methods tvl1,...] [--sequences ...]
                              [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
+    varflow bench middlebury-multiframe [--data DIR] [--methods rlr,twoframe,...]
+                             [--sintel] [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
 
 Method parameters become flags automatically: every field of the parameter
 dataclass of every registered method is offered as ``--field-name`` (booleans as
@@ -560,6 +562,51 @@ def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench import write_csv
+    from varflow.evaluation.bench_multiframe import (
+        format_multiframe_table,
+        run_middlebury_multiframe,
+        run_sintel_multiframe,
+        sintel_snippets,
+    )
+    from varflow.evaluation.datasets import _HINT, data_root
+
+    methods = _split_list(args.methods)
+    if not methods:
+        raise ValueError("--methods: give at least one trajectory method name")
+    for m in methods:
+        get_tracker(m)
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    overrides = _given_params(args)
+    snippets = None
+    if args.sintel:  # fail before the Middlebury runs when Sintel is missing
+        snippets = sintel_snippets(root)
+        if not snippets:
+            raise FileNotFoundError(
+                f"no Sintel snippet with ground truth under {root / 'sintel' / 'training'}; "
+                f"{_HINT}"
+            )
+    rows = run_middlebury_multiframe(methods, overrides, progress=not args.quiet, root=root)
+    print(f"Middlebury RubberWhale frame07-frame14, reference frame10, scored on frame10 -> "
+          f"frame11 (known pixels), data {root}; seconds exclude JIT warm-up")
+    print(format_multiframe_table(rows))
+    if snippets is not None:
+        srows = run_sintel_multiframe(methods, overrides, progress=not args.quiet, root=root,
+                                      snippets=snippets, warm_up=False)
+        print()
+        print("MPI-Sintel snippets, reference = the frame with ground truth (and occlusion "
+              "mask), scored on reference -> next frame; AEE over valid pixels, AEE noc "
+              "over non-occluded ones (report only)")
+        print(format_multiframe_table(srows))
+        rows = rows + srows
+    if csv_path is not None:
+        write_csv(rows, csv_path)
+        print(f"wrote {csv_path}")
+    return 0
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -632,8 +679,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="trajectories (F, H, W, 2), the reference index and metadata")
     p.add_argument("--ref", type=int, default=None, metavar="K",
                    help="reference frame index (default: the centre frame)")
-    p.add_argument("--method", default="chain", metavar="NAME",
-                   help=f"one of: {', '.join(TRACKERS)} (default chain)")
+    p.add_argument("--method", default="rlr", metavar="NAME",
+                   help=f"one of: {', '.join(TRACKERS)} (default rlr)")
     p.add_argument("--warped", metavar="DIR", help="write every frame warped back to the "
                    "reference (warped_NNNN.png)")
     p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
@@ -687,6 +734,27 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
+
+    from .evaluation.bench_multiframe import default_methods
+
+    mf_default = ",".join(default_methods())
+    b = bsub.add_parser("middlebury-multiframe", parents=[common],
+                        help="trajectory methods on RubberWhale (8 frames), scored on "
+                        "frame10 -> frame11",
+                        description="Trajectory methods on Middlebury RubberWhale frame07-"
+                        "frame14 with reference frame10: AEE/AAE of the frame11 displacement "
+                        "against flow10.flo, next to the TV-L1 pair baseline; --sintel adds "
+                        "the same report on the MPI-Sintel snippets.")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    b.add_argument("--methods", default=mf_default, metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default {mf_default})")
+    b.add_argument("--sintel", action="store_true",
+                   help="also report on the MPI-Sintel snippets found under the data folder")
+    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(b, tparams, n_methods=len(TRACKERS))
+    b.set_defaults(func=_cmd_bench_middlebury_multiframe)
     return parser
 
 

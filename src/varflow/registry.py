@@ -13,6 +13,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .multiframe import rlr as _rlr
 from .multiframe import track as _track
 from .twoframe import sparse as _sparse
 from .twoframe import tensor as _tensor
@@ -113,6 +114,12 @@ class Tracker:
 
 
 TRACKERS: dict[str, Tracker] = {
+    "rlr": Tracker(
+        name="rlr",
+        params=_rlr.RLRParams,
+        track=_rlr.track_rlr,
+        description="robust low-rank trajectories (data + TV_g + nuclear norm + L1 link)",
+    ),
     "twoframe": Tracker(
         name="twoframe",
         params=_track.TwoFrameTrackParams,

@@ -1,0 +1,654 @@
+"""Robust Low-Rank (RLR) dense trajectories (Gibson & Marques 2016, ch. 4).
+
+Energy over the trajectories ``U`` of the reference pixels in all ``F`` frames
+(matrix view ``(2F, N)``, see :mod:`varflow.multiframe.lowrank`) and an auxiliary
+low-rank matrix ``L``::
+
+    E(U, L) = Σ_n [ λ_D Σ_c |ρ_{n,c}(u_n)| + λ_TV Σ_x g(x) (|∇u_{n,1}| + |∇u_{n,2}|) ]
+              + α ||L||_*  +  τ ||U − L||_1
+
+with ``ρ_{n,c}`` the colour constancy residual of frame ``n`` against the reference,
+linearised around the current estimate and re-warped coarse to fine, and ``g`` the
+edge weight of the reference frame.  The frames are coupled only through ``L``.
+It is minimised by alternation, after every warp of every pyramid level:
+
+1. **U-step** (``L`` fixed).  The energy splits into one problem per frame,
+   ``G_n(u_n) + H(∇u_n)`` with the point-wise ``G_n = λ_D Σ_c |ρ_{n,c}| + τ |u_n − l_n|_1``
+   and ``H`` the weighted TV.  It is solved by Condat's primal-dual algorithm
+   (Condat 2013) without smooth term and relaxation ρ = 1, which is the
+   Chambolle-Pock iteration::
+
+       ũ = prox_{s G}(u + s div p)
+       p ← Π_{|p| ≤ λ_TV g}(p + σ ∇(2ũ − u)),   u ← ũ,          s σ ||∇||² ≤ 1
+
+   over all frames (a Numba kernel per frame, rows in parallel).  The prox of
+   ``G_n`` is a sum of ``C + 2`` linear-L1 terms — the link terms are the
+   residuals ``u_{n,k} − l_{n,k}`` with gradients along the axes — so the data-term
+   machinery of TV-L1 applies with two extra "channels".  It is computed
+   **exactly** by enumerating the faces of the piecewise-quadratic energy (23
+   candidates for a grey frame, 122 for colour, see :func:`prox_faces`), or by the
+   warm-started dual coordinate descent of TV-L1 (:func:`varflow.ops.prox.prox_linear_l1`),
+   which converges to the same point and is much cheaper for colour
+   (``data_prox="auto"``: exact for grey, coordinate descent for colour).
+2. **L-step** (``U`` fixed).  ``min_L α ||L||_* + τ ||U − L||_1`` is principal
+   component pursuit with ``λ = τ / α``, solved in linear time by l1 filtering
+   (:func:`varflow.multiframe.lowrank.lowrank_step`).  ``α`` follows from the
+   PCP weight ``λ = κ / sqrt(max(2F, N))`` (``κ = pcp_scale``), so that the balance
+   of the two terms does not depend on the size of the pyramid level.
+
+The reference row of ``U`` is zero by definition and kept fixed.  With ``τ = 0``
+the U-step is ``F − 1`` independent two-frame TV-L1 problems.  The trajectories
+are initialised by the two-frame engine (``init="twoframe"``: TV-L1 from the
+reference to every frame, as the ``twoframe`` tracker) or with zero motion, and
+then refined over the finest ``refine_levels`` levels of the multi-frame pyramid
+(all levels from zero motion).  Each alternation runs the L-step on the current
+``U`` first, then the U-step linked to that ``L``.
+
+References
+----------
+J. Gibson, O. Marques, "Optical Flow and Trajectory Estimation Methods",
+SpringerBriefs in Computer Science, Springer 2016, ch. 4.
+
+L. Condat, "A primal-dual splitting method for convex optimization involving
+Lipschitzian, proximable and linear composite terms", J. Optim. Theory Appl.
+158(2), 2013.
+
+A. Chambolle, T. Pock, "A first-order primal-dual algorithm for convex problems
+with applications to imaging", J. Math. Imaging Vis. 40(1), 2011.
+
+R. Liu, Z. Lin, S. Yan, J. Sun, X. Yuan, Y. Ma, "Solving principal component
+pursuit in linear time via l1 filtering", Neurocomputing 2016.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from ..ops.differences import divergence, gradient, image_derivatives
+from ..ops.median import median_filter_flow
+from ..ops.prox import project_l2_ball, prox_linear_l1, prox_linear_l1_exact
+from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_bilinear, resize_flow
+from ..ops.warp import warp_bicubic
+from ..twoframe.coarse_to_fine import _check, preprocess
+from ..twoframe.tvl1 import (
+    _F0,
+    _F1,
+    _NO_TENSOR,
+    TVL1Params,
+    _data_prox_row,
+    _dual_row,
+    _primal_row,
+    _row_blocks,
+    edge_weight,
+    linearise,
+)
+from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
+from .track import TrackCallback, track_twoframe
+
+__all__ = [
+    "RLRParams",
+    "track_rlr",
+    "ustep_iterations",
+    "ustep_iterations_numpy",
+    "prox_faces",
+    "link_channels",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RLRParams(TVL1Params):
+    """Parameters of Robust Low-Rank trajectories.
+
+    The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` serve the two-frame
+    initialisation (``init="twoframe"``) and are shared by the multi-frame
+    refinement: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…), the
+    pre-processing, the median filter, λ_D = ``data_weight``, the edge weight
+    (``edge_weight``, ``edge_weight_min``) and ``max_iterations`` (also the
+    primal-dual iterations per warp and alternation of the U-step); ``tolerance``
+    only serves the initialisation (see ``ustep_tolerance``).
+
+    Attributes
+    ----------
+    tv_weight : float
+        λ_TV, weight of the edge-weighted TV of every frame's displacement
+        (relative to λ_D = ``data_weight`` as in TV-L1).  Default 1.
+    link_weight : float
+        τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
+        the units of the TV weight).  0 decouples the frames (no L-step).  Default 2.
+    pcp_scale : float
+        κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
+        standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
+        α.  Larger κ keeps more rank.  Default 1.
+    rank_tol : float
+        Relative singular-value threshold of the L-step's basis: directions of the
+        seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
+        rank is estimated, never given).  Dense estimation noise otherwise enters
+        ``L`` as many tiny singular values.  Default 0.03.
+    primal_step : float
+        s, primal step of the primal-dual iteration; the dual step is
+        σ = 1 / (8 s) (so that s σ ||∇||² ≤ 1).  Default 0.25.
+    alternations : int
+        U-step / L-step alternations per warp.  Default 1.
+    lowrank_method : {"linear", "exact"}
+        L-step solver: l1 filtering on a random column sample (linear cost) or full
+        PCP (reference; its L is truncated by the same ``rank_tol`` rule).
+        Default "linear".
+    lowrank_samples : int
+        Columns sampled by the linear L-step; 0 = the solver's default
+        (20 · 2F).  Default 0.
+    data_prox : {"auto", "exact", "cd"}
+        Point-wise prox of data + link terms: exact face enumeration, dual
+        coordinate descent (``data_sweeps`` sweeps per iteration, warm started), or
+        "auto" = exact for grey frames, coordinate descent for colour.
+    init : {"twoframe", "zero"}
+        Initial trajectories: TV-L1 from the reference to every frame, or zero.
+        Default "twoframe".
+    seed : int
+        Seed of the L-step's column sampling (local generator).  Default 0.
+    link_edge : bool
+        Scale the link weight by the edge weight g(x) (weaker link across image
+        edges).  Default False.
+    refine_levels : int
+        With ``init="twoframe"``, the multi-frame refinement runs on this many of
+        the finest pyramid levels, starting from the initial trajectories resized to
+        the coarsest of them; 0 = every level.  Restarting the refinement from the
+        coarsest level would throw the initialisation's detail away.  Default 3.
+    ustep_tolerance : float
+        Stop a U-step early when the RMS change of a frame's displacement per
+        primal-dual iteration is below this many pixels; 0 runs
+        ``max_iterations`` iterations.  The primal-dual steps are small, so the
+        TV-L1 ``tolerance`` (which serves the initialisation) would stop it after a
+        few iterations.  Default 0.
+    """
+
+    tv_weight: float = 1.0
+    link_weight: float = 2.0
+    pcp_scale: float = 1.0
+    rank_tol: float = 0.03
+    primal_step: float = 0.25
+    alternations: int = 1
+    lowrank_method: str = "linear"
+    lowrank_samples: int = 0
+    data_prox: str = "auto"
+    init: str = "twoframe"
+    seed: int = 0
+    link_edge: bool = False
+    refine_levels: int = 3
+    ustep_tolerance: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check(self.tv_weight > 0, "tv_weight", f"must be > 0, got {self.tv_weight}")
+        _check(self.link_weight >= 0, "link_weight", f"must be >= 0, got {self.link_weight}")
+        _check(self.pcp_scale > 0, "pcp_scale", f"must be > 0, got {self.pcp_scale}")
+        _check(0 < self.rank_tol < 1, "rank_tol", f"must be in (0, 1), got {self.rank_tol}")
+        _check(self.primal_step > 0, "primal_step", f"must be > 0, got {self.primal_step}")
+        _check(self.ustep_tolerance >= 0, "ustep_tolerance",
+               f"must be >= 0, got {self.ustep_tolerance}")
+        _check(self.refine_levels >= 0, "refine_levels",
+               f"must be >= 0, got {self.refine_levels}")
+        _check(self.alternations >= 1, "alternations", f"must be >= 1, got {self.alternations}")
+        _check(
+            self.lowrank_method in ("linear", "exact"),
+            "lowrank_method",
+            f"must be 'linear' or 'exact', got {self.lowrank_method!r}",
+        )
+        _check(
+            self.lowrank_samples >= 0,
+            "lowrank_samples",
+            f"must be >= 0, got {self.lowrank_samples}",
+        )
+        _check(
+            self.data_prox in ("auto", "exact", "cd"),
+            "data_prox",
+            f"must be 'auto', 'exact' or 'cd', got {self.data_prox!r}",
+        )
+        _check(
+            self.init in ("twoframe", "zero"),
+            "init",
+            f"must be 'twoframe' or 'zero', got {self.init!r}",
+        )
+
+
+# ----------------------------------------------------------------- point-wise prox
+@nb.njit(cache=True, fastmath=False, error_model="numpy")
+def _faces_energy(v1, v2, z1, z2, bx, by, cc, inv2t):
+    e = ((v1 - z1) ** 2 + (v2 - z2) ** 2) * inv2t
+    for k in range(bx.shape[0]):
+        e += abs(cc[k] + bx[k] * v1 + by[k] * v2)
+    return e
+
+
+@nb.njit(cache=True, fastmath=False, error_model="numpy")
+def _prox_faces_pixel(z1, z2, bx, by, cc, t):
+    """Exact ``argmin_v |v − z|²/(2t) + Σ_k |cc_k + b_k·v|`` by face enumeration (float64)."""
+    nk = bx.shape[0]
+    inv2t = 0.5 / t
+    best = _faces_energy(z1, z2, z1, z2, bx, by, cc, inv2t)
+    b1 = z1
+    b2 = z2
+    # interior of a region: every sign fixed
+    for mask in range(1 << nk):
+        v1 = z1
+        v2 = z2
+        for k in range(nk):
+            s = t if (mask >> k) & 1 else -t
+            v1 -= s * bx[k]
+            v2 -= s * by[k]
+        e = _faces_energy(v1, v2, z1, z2, bx, by, cc, inv2t)
+        if e < best:
+            best, b1, b2 = e, v1, v2
+    # on the line of term k, the other signs fixed
+    for k in range(nk):
+        nn = bx[k] * bx[k] + by[k] * by[k]
+        if nn < 1e-24:
+            continue
+        for mask in range(1 << nk):
+            if (mask >> k) & 1:
+                continue
+            v1 = z1
+            v2 = z2
+            for j in range(nk):
+                if j != k:
+                    s = t if (mask >> j) & 1 else -t
+                    v1 -= s * bx[j]
+                    v2 -= s * by[j]
+            r = (cc[k] + bx[k] * v1 + by[k] * v2) / nn
+            v1 -= r * bx[k]
+            v2 -= r * by[k]
+            e = _faces_energy(v1, v2, z1, z2, bx, by, cc, inv2t)
+            if e < best:
+                best, b1, b2 = e, v1, v2
+    # crossing of two lines
+    for k in range(nk):
+        for j in range(k + 1, nk):
+            det = bx[k] * by[j] - by[k] * bx[j]
+            if abs(det) < 1e-18:
+                continue
+            v1 = (-cc[k] * by[j] + by[k] * cc[j]) / det
+            v2 = (-bx[k] * cc[j] + cc[k] * bx[j]) / det
+            e = _faces_energy(v1, v2, z1, z2, bx, by, cc, inv2t)
+            if e < best:
+                best, b1, b2 = e, v1, v2
+    return b1, b2
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _prox_faces_kernel(u, a, ix, iy, t, out):
+    nk, h, w = a.shape
+    for i in nb.prange(h):
+        bx = np.empty(nk, np.float64)
+        by = np.empty(nk, np.float64)
+        cc = np.empty(nk, np.float64)
+        for j in range(w):
+            for k in range(nk):
+                bx[k] = ix[k, i, j]
+                by[k] = iy[k, i, j]
+                cc[k] = a[k, i, j]
+            v1, v2 = _prox_faces_pixel(np.float64(u[0, i, j]), np.float64(u[1, i, j]),
+                                       bx, by, cc, t)
+            out[0, i, j] = v1
+            out[1, i, j] = v2
+
+
+def prox_faces(u: np.ndarray, a: np.ndarray, ix: np.ndarray, iy: np.ndarray,
+               t: float) -> np.ndarray:
+    """Exact point-wise prox of ``t Σ_k |a_k + (ix_k, iy_k)·v|`` (Numba, planar arrays).
+
+    Same problem as :func:`varflow.ops.prox.prox_linear_l1_exact` (its NumPy
+    reference) with planar ``(K, H, W)`` terms: evaluates the energy at the
+    minimiser of every region (2^K), of every line with the other signs fixed
+    (K·2^(K−1)) and at every crossing of two lines (K(K−1)/2) — 23 candidates for
+    K = 3 (grey + two link terms), 122 for K = 5 — and keeps the lowest.
+
+    Parameters
+    ----------
+    u : ndarray, shape (2, H, W)
+        Point to project (the prox argument).
+    a, ix, iy : ndarray, shape (K, H, W)
+        Terms ``a_k + ix_k v_1 + iy_k v_2``.
+    t : float
+        Step.
+
+    Returns
+    -------
+    ndarray, shape (2, H, W), float32
+    """
+    out = np.empty((2,) + a.shape[1:], np.float32)
+    _prox_faces_kernel(np.ascontiguousarray(u, np.float32), np.ascontiguousarray(a, np.float32),
+                       np.ascontiguousarray(ix, np.float32), np.ascontiguousarray(iy, np.float32),
+                       float(t), out)
+    return out
+
+
+def link_channels(ix: np.ndarray, iy: np.ndarray, a: np.ndarray, lk: np.ndarray | None,
+                  ratio: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Append the link terms ``(τ/λ_D) |u_k − l_k|`` as two extra data "channels".
+
+    ``τ |u_k − l_k| = λ_D |r (u_k − l_k)|`` with ``r = τ / λ_D``: a linear-L1 term
+    with gradient ``r e_k`` and constant ``−r l_k``, so the data prox of TV-L1
+    treats it like a colour channel.
+
+    Parameters
+    ----------
+    ix, iy, a : ndarray, shape (C, H, W)
+        Linearised data terms of one frame.
+    lk : ndarray, shape (2, H, W), or None
+        The low-rank trajectories of this frame; None (or ``ratio == 0``) adds nothing.
+    ratio : float or ndarray, shape (H, W)
+        ``τ / λ_D`` (per pixel when an array, e.g. scaled by the edge weight).
+
+    Returns
+    -------
+    ix, iy, a : ndarray, shape (C + 2, H, W) (or (C, H, W)), float32
+    """
+    if lk is None or (np.isscalar(ratio) and ratio == 0):
+        return ix, iy, a
+    c, h, w = a.shape
+    r = np.asarray(ratio, np.float32)
+    ixe = np.zeros((c + 2, h, w), np.float32)
+    iye = np.zeros((c + 2, h, w), np.float32)
+    ae = np.empty((c + 2, h, w), np.float32)
+    ixe[:c], iye[:c], ae[:c] = ix, iy, a
+    ixe[c] = r
+    iye[c + 1] = r
+    ae[c:] = -r * lk
+    return ixe, iye, ae
+
+
+# ------------------------------------------------------------------------ U-step
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old, s, t, n_sweeps, exact, sc):
+    """Primal step of row ``i``: ``ũ = prox_{sG}(u + s div p)``; ``ubar = 2ũ − u``."""
+    w = u.shape[2]
+    nk = a.shape[0]
+    o1 = old[0]
+    o2 = old[1]
+    for j in range(w):
+        o1[j] = u[0, i, j]
+        o2[j] = u[1, i, j]
+    _primal_row(u, p, i, 0, o1, s)  # u = old + s div p (reads p only)
+    _primal_row(u, p, i, 1, o2, s)
+    d1 = u[0, i]
+    d2 = u[1, i]
+    if exact:
+        bx = sc[0]
+        by = sc[1]
+        cc = sc[2]
+        for j in range(w):
+            for k in range(nk):
+                bx[k] = ix[k, i, j]
+                by[k] = iy[k, i, j]
+                cc[k] = a[k, i, j]
+            v1, v2 = _prox_faces_pixel(np.float64(d1[j]), np.float64(d2[j]), bx, by, cc,
+                                       np.float64(t))
+            d1[j] = v1
+            d2[j] = v2
+    else:
+        _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
+    err = _F0
+    b1 = ubar[0, i]
+    b2 = ubar[1, i]
+    for j in range(w):
+        e1 = d1[j] - o1[j]
+        e2 = d2[j] - o2[j]
+        err += e1 * e1 + e2 * e2
+        b1[j] = d1[j] + e1
+        b2[j] = d2[j] + e2
+    return err
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def ustep_iterations(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweeps, exact,
+                     blocks):
+    """Numba primal-dual (Condat / Chambolle-Pock) iterations of one frame's U-step.
+
+    Minimises ``λ Σ_k |a_k + (ix_k, iy_k)·u| + Σ_x g (|∇u_1| + |∇u_2|)`` (the data and
+    link terms of :func:`link_channels`, the TV weight folded into ``g``); updates
+    ``u``, ``p``, ``q`` and the scratch ``ubar`` in place.
+
+    Parameters
+    ----------
+    ix, iy, a : (K, H, W) float32
+        Linear-L1 terms (zero where a data term is off).
+    g : (H, W) float32
+        Radius of the dual ball, ``λ_TV g(x)``.
+    u : (2, H, W) float32
+        Displacement of this frame, planar.
+    p : (4, H, W) float32
+        Dual TV variables (p1x, p1y, p2x, p2y).
+    q : (K, H, W) float32
+        Dual variables of the coordinate-descent prox (warm start; unused if ``exact``).
+    ubar : (2, H, W) float32
+        Scratch for the extrapolated primal ``2ũ − u``.
+    lam, s : float
+        λ_D and the primal step s; the dual step is ``1 / (8 s)``.
+    max_iter : int
+    tol : float
+        Stop when the RMS change of ``u`` is below ``tol`` pixels.
+    n_sweeps : int
+        Coordinate-descent sweeps per iteration.
+    exact : bool
+        Exact face enumeration instead of coordinate descent.
+    blocks : (n+1,) int64
+        Row-block bounds.
+
+    Returns
+    -------
+    int
+        Iterations performed.
+    """
+    nk, h, w = a.shape
+    t = lam * s
+    sigma = _F1 / (np.float32(8.0) * s)
+    tol2 = tol * tol
+    n_blk = blocks.shape[0] - 1
+    errs = np.zeros(n_blk, np.float64)
+    old = np.empty((n_blk, 2, w), np.float32)
+    sc = np.empty((n_blk, 3, nk), np.float64)
+    it = 0
+    while it < max_iter:
+        it += 1
+        for b in nb.prange(n_blk):
+            err = 0.0
+            for i in range(blocks[b], blocks[b + 1]):
+                err += _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old[b], s, t, n_sweeps,
+                                         exact, sc[b])
+            errs[b] = err
+        for b in nb.prange(n_blk):
+            for i in range(blocks[b], blocks[b + 1]):
+                _dual_row(ubar, p, p, g, _NO_TENSOR, i, sigma, False)
+        if errs.sum() / (h * w) < tol2:
+            break
+    return it
+
+
+def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweeps, exact,
+                           blocks=None):
+    """NumPy reference of :func:`ustep_iterations` (same arguments, in-place updates)."""
+    _, h, w = a.shape
+    t = float(lam) * float(s)
+    sigma = 1.0 / (8.0 * float(s))
+    hw = lambda x: np.moveaxis(x, 0, -1)  # noqa: E731 - planar -> channels last view
+    it = 0
+    while it < max_iter:
+        it += 1
+        old = u.copy()
+        z = np.stack([u[k] + s * divergence(hw(p[2 * k: 2 * k + 2])) for k in (0, 1)])
+        if exact:
+            d = prox_linear_l1_exact(hw(z), hw(a), hw(ix), hw(iy), t)
+        else:
+            d, qn = prox_linear_l1(hw(z), hw(a), hw(ix), hw(iy), t, n_sweeps=n_sweeps,
+                                   q0=hw(q))
+            q[...] = np.moveaxis(qn, -1, 0)
+        u[...] = np.moveaxis(d, -1, 0)
+        ubar[...] = 2 * u - old
+        for k in (0, 1):
+            pk = project_l2_ball(hw(p[2 * k: 2 * k + 2]) + sigma * gradient(ubar[k]), g)
+            p[2 * k: 2 * k + 2] = np.moveaxis(pk, -1, 0)
+        if float(((u - old) ** 2).sum()) / (h * w) < tol * tol:
+            break
+    return it
+
+
+# ------------------------------------------------------------------------ driver
+def _pcp_alpha(tau: float, kappa: float, shape: tuple[int, int]) -> float:
+    """Nuclear weight α with ``τ / α = κ / sqrt(max(m, n))``."""
+    return tau * math.sqrt(max(shape)) / kappa
+
+
+def _resize_dual(p: np.ndarray, shape: tuple[int, int], g: np.ndarray) -> np.ndarray:
+    h, w = shape
+    q = resize_bilinear(np.moveaxis(p, 0, -1), (h, w)).reshape(h, w, 2, 2)
+    q = project_l2_ball(q, g[..., None]).reshape(h, w, 4)
+    return np.ascontiguousarray(np.moveaxis(q, -1, 0), dtype=np.float32)
+
+
+def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
+              callback: TrackCallback | None = None, engine: str = "numba",
+              stats: dict | None = None) -> np.ndarray:
+    """Robust Low-Rank trajectories (see the module docstring).
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W, C), float32
+        From :func:`varflow.multiframe.track.check_frames`.
+    ref : int
+        Reference frame.
+    params : RLRParams
+    callback : callable, optional
+        ``callback(done, total)`` after each flow of the initialisation and each
+        warp of the multi-frame pyramid.
+    engine : {"numba", "numpy"}
+        U-step kernel.
+    stats : dict, optional
+        Filled with ``levels``, ``warps``, ``init_seconds``, ``ustep_seconds``,
+        ``lstep_seconds``, ``seconds``, ``ranks`` (rank found by each L-step).
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+    """
+    if engine not in ("numba", "numpy"):
+        raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
+    stats = {} if stats is None else stats
+    t_start = time.perf_counter()
+    n_frames, height, width, n_ch = frames.shape
+    others = [n for n in range(n_frames) if n != ref]
+    shapes = pyramid_shapes((height, width), params.max_levels, params.scale_factor,
+                            params.min_size)
+    n_levels = len(shapes)
+    total_warps = n_levels * params.n_warps
+    n_init = len(others) if params.init == "twoframe" else 0
+    total = n_init + total_warps
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if callback is not None:
+            callback(done, total)
+
+    if params.init == "twoframe":
+        init = track_twoframe(frames, ref, params, callback=lambda d, t: tick())
+    else:
+        init = np.zeros((n_frames, height, width, 2), np.float32)
+    stats["init_seconds"] = time.perf_counter() - t_start
+
+    pre = [preprocess(frames[n], params) for n in range(n_frames)]
+    pyrs = [build_pyramid(x, shapes, params.scale_factor, params.pyramid_sigma) for x in pre]
+    del pre
+    lam = np.float32(params.data_weight)
+    s = np.float32(params.primal_step)
+    tau = float(params.link_weight)
+    ratio = tau / float(params.data_weight)
+    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_ch == 1)
+    kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
+    ranks: list[int] = []
+    t_u = t_l = 0.0
+
+    def lstep(traj: np.ndarray) -> np.ndarray:
+        umat = trajectories_to_matrix(traj)
+        kw: dict = {}
+        if params.lowrank_method == "linear":
+            kw = {"seed": params.seed, "rank_tol": params.rank_tol}
+            if params.lowrank_samples:
+                kw["n_samples"] = params.lowrank_samples
+        alpha = _pcp_alpha(tau, params.pcp_scale, umat.shape)
+        lm, _, info = lowrank_step(umat, alpha, tau, method=params.lowrank_method, **kw)
+        if params.lowrank_method == "exact":  # the same rank rule as the linear solver
+            uu, sv, vt = np.linalg.svd(lm.astype(np.float64), full_matrices=False)
+            keep = sv > params.rank_tol * sv[0] if sv.size and sv[0] > 0 else sv > 0
+            lm = ((uu[:, keep] * sv[keep]) @ vt[keep]).astype(umat.dtype)
+            info["rank"] = int(keep.sum())
+        ranks.append(int(info.get("rank", -1)))
+        out = matrix_to_trajectories(lm, traj.shape[1], traj.shape[2])
+        out[ref] = 0.0
+        return out
+
+    n_run = n_levels
+    if params.init == "twoframe" and params.refine_levels > 0:
+        n_run = min(params.refine_levels, n_levels)
+    total -= (n_levels - n_run) * params.n_warps
+    traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
+    p_all: np.ndarray | None = None
+    for level in range(n_run - 1, -1, -1):
+        h, w = shapes[level]
+        if traj.shape[1:3] != (h, w):
+            traj = np.stack([resize_flow(traj[n], (h, w)) for n in range(n_frames)])
+        i0 = pyrs[ref][level]
+        g = edge_weight(i0, params.edge_weight, params.edge_weight_min)
+        g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
+        if p_all is None:
+            p_all = np.zeros((n_frames, 4, h, w), np.float32)
+        else:
+            p_all = np.stack([_resize_dual(p_all[n], (h, w), g) for n in range(n_frames)])
+        blocks = _row_blocks(h)
+        ubar = np.empty((2, h, w), np.float32)
+        planes = []
+        for n in range(n_frames):
+            i1 = pyrs[n][level]
+            dx, dy = image_derivatives(i1)
+            planes.append(np.concatenate([i1, dx, dy], axis=2))
+        ratio_map = ratio * g / np.float32(params.tv_weight) if params.link_edge else ratio
+        n_k = n_ch + (2 if tau > 0 else 0)
+        q_all = np.zeros((n_frames, n_k, h, w), np.float32)
+        for _k in range(params.n_warps):
+            lins = {}
+            for n in others:
+                warped, inside = warp_bicubic(planes[n], traj[n])
+                lins[n] = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
+                                    warped[..., 2 * n_ch:], inside, traj[n])
+            for _a in range(params.alternations):
+                t0 = time.perf_counter()
+                lmat = lstep(traj) if tau > 0 else None  # L-step on the current U
+                t1 = time.perf_counter()
+                t_l += t1 - t0
+                for n in others:  # U-step with L fixed, frame by frame
+                    lk = None if lmat is None else np.ascontiguousarray(
+                        np.moveaxis(lmat[n], -1, 0))
+                    ix, iy, a = link_channels(*lins[n], lk, ratio_map)
+                    u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
+                    kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, lam, s,
+                           params.max_iterations, np.float32(params.ustep_tolerance),
+                           params.data_sweeps, exact, blocks)
+                    traj[n] = np.moveaxis(u, 0, -1)
+                t_u += time.perf_counter() - t1
+            if params.median_size > 1:
+                for n in others:
+                    traj[n] = median_filter_flow(traj[n], params.median_size)
+            tick()
+    stats.update(levels=n_run, warps=n_run * params.n_warps, ustep_seconds=t_u, lstep_seconds=t_l,
+                 ranks=ranks, seconds=time.perf_counter() - t_start)
+    log.debug("rlr: %d levels, U-step %.2fs, L-step %.2fs, ranks %s", n_levels, t_u, t_l,
+              ranks[-3:])
+    traj[ref] = 0.0
+    return traj.astype(np.float32, copy=False)
