@@ -20,6 +20,7 @@ from varflow.ops.prox import linear_l1_energy, prox_linear_l1_exact
 from varflow.twoframe.tvl1 import _row_blocks, tvl1_iterations
 
 RNG = np.random.default_rng(7)
+NO_M = np.zeros((2, 1, 1), np.float32)
 
 
 def _terms(h, w, c, link=True, seed=0):
@@ -58,7 +59,8 @@ def test_ustep_numba_matches_numpy(exact):
         u = np.zeros((2, h, w), np.float32)
         p = np.zeros((4, h, w), np.float32)
         q = np.zeros((a.shape[0], h, w), np.float32)
-        n = kern(ix, iy, a, g, u, p, q, np.empty_like(u), np.float32(40), np.float32(0.25),
+        n = kern(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0), np.float32(40),
+                 np.float32(0.25),
                  30, np.float32(0), 1, exact, _row_blocks(h))
         assert n == 30
         outs.append((u, p))
@@ -81,8 +83,9 @@ def test_coordinate_descent_prox_converges_to_the_exact_one():
         u = np.zeros((2, h, w), np.float32)
         p = np.zeros((4, h, w), np.float32)
         q = np.zeros((a.shape[0], h, w), np.float32)
-        ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), np.float32(40),
-                         np.float32(0.25), 3000, np.float32(0), 2, exact, _row_blocks(h))
+        ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0),
+                         np.float32(40), np.float32(0.25), 3000, np.float32(0), 2, exact,
+                         _row_blocks(h))
         res[exact] = u
     e_cd, e_ex = (_energy(res[k], ix, iy, a, g, 40.0) for k in (False, True))
     assert abs(e_cd - e_ex) < 1e-3 * e_ex
@@ -98,7 +101,8 @@ def test_primal_dual_reaches_a_lower_energy_than_the_coupled_tvl1_scheme():
     u = np.zeros((2, h, w), np.float32)
     p = np.zeros((4, h, w), np.float32)
     q = np.zeros((3, h, w), np.float32)
-    ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), np.float32(40), np.float32(0.25),
+    ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0),
+                     np.float32(40), np.float32(0.25),
                      4000, np.float32(0), 2, False, _row_blocks(h))
     uz = np.zeros((2, h, w), np.float32)
     pz = np.zeros((4, h, w), np.float32)

@@ -13,6 +13,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .multiframe import mfsf as _mfsf
 from .multiframe import rlr as _rlr
 from .multiframe import track as _track
 from .twoframe import sparse as _sparse
@@ -119,6 +120,13 @@ TRACKERS: dict[str, Tracker] = {
         params=_rlr.RLRParams,
         track=_rlr.track_rlr,
         description="robust low-rank trajectories (data + TV_g + nuclear norm + L1 link)",
+    ),
+    "mfsf": Tracker(
+        name="mfsf",
+        params=_mfsf.MFSFParams,
+        track=_mfsf.track_mfsf,
+        description="multi-frame subspace flow (Garg et al.): soft constraint to a PCA/DCT "
+        "trajectory basis",
     ),
     "twoframe": Tracker(
         name="twoframe",

@@ -66,6 +66,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -92,7 +93,10 @@ from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matri
 from .track import TrackCallback, track_twoframe
 
 __all__ = [
+    "MultiFrameParams",
     "RLRParams",
+    "Coupling",
+    "refine_trajectories",
     "track_rlr",
     "ustep_iterations",
     "ustep_iterations_numpy",
@@ -104,8 +108,8 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class RLRParams(TVL1Params):
-    """Parameters of Robust Low-Rank trajectories.
+class MultiFrameParams(TVL1Params):
+    """Fields shared by the multi-frame methods (RLR, MFSF).
 
     The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` serve the two-frame
     initialisation (``init="twoframe"``) and are shared by the multi-frame
@@ -120,30 +124,11 @@ class RLRParams(TVL1Params):
     tv_weight : float
         λ_TV, weight of the edge-weighted TV of every frame's displacement
         (relative to λ_D = ``data_weight`` as in TV-L1).  Default 1.
-    link_weight : float
-        τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
-        the units of the TV weight).  0 decouples the frames (no L-step).  Default 2.
-    pcp_scale : float
-        κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
-        standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
-        α.  Larger κ keeps more rank.  Default 1.
-    rank_tol : float
-        Relative singular-value threshold of the L-step's basis: directions of the
-        seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
-        rank is estimated, never given).  Dense estimation noise otherwise enters
-        ``L`` as many tiny singular values.  Default 0.03.
     primal_step : float
         s, primal step of the primal-dual iteration; the dual step is
         σ = 1 / (8 s) (so that s σ ||∇||² ≤ 1).  Default 0.25.
     alternations : int
-        U-step / L-step alternations per warp.  Default 1.
-    lowrank_method : {"linear", "exact"}
-        L-step solver: l1 filtering on a random column sample (linear cost) or full
-        PCP (reference; its L is truncated by the same ``rank_tol`` rule).
-        Default "linear".
-    lowrank_samples : int
-        Columns sampled by the linear L-step; 0 = the solver's default
-        (20 · 2F).  Default 0.
+        Coupling-target / U-step alternations per warp.  Default 1.
     data_prox : {"auto", "exact", "cd"}
         Point-wise prox of data + link terms: exact face enumeration, dual
         coordinate descent (``data_sweeps`` sweeps per iteration, warm started), or
@@ -151,11 +136,6 @@ class RLRParams(TVL1Params):
     init : {"twoframe", "zero"}
         Initial trajectories: TV-L1 from the reference to every frame, or zero.
         Default "twoframe".
-    seed : int
-        Seed of the L-step's column sampling (local generator).  Default 0.
-    link_edge : bool
-        Scale the link weight by the edge weight g(x) (weaker link across image
-        edges).  Default False.
     refine_levels : int
         With ``init="twoframe"``, the multi-frame refinement runs on this many of
         the finest pyramid levels, starting from the initial trajectories resized to
@@ -170,42 +150,18 @@ class RLRParams(TVL1Params):
     """
 
     tv_weight: float = 1.0
-    link_weight: float = 2.0
-    pcp_scale: float = 1.0
-    rank_tol: float = 0.03
     primal_step: float = 0.25
     alternations: int = 1
-    lowrank_method: str = "linear"
-    lowrank_samples: int = 0
     data_prox: str = "auto"
     init: str = "twoframe"
-    seed: int = 0
-    link_edge: bool = False
     refine_levels: int = 3
     ustep_tolerance: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check(self.tv_weight > 0, "tv_weight", f"must be > 0, got {self.tv_weight}")
-        _check(self.link_weight >= 0, "link_weight", f"must be >= 0, got {self.link_weight}")
-        _check(self.pcp_scale > 0, "pcp_scale", f"must be > 0, got {self.pcp_scale}")
-        _check(0 < self.rank_tol < 1, "rank_tol", f"must be in (0, 1), got {self.rank_tol}")
         _check(self.primal_step > 0, "primal_step", f"must be > 0, got {self.primal_step}")
-        _check(self.ustep_tolerance >= 0, "ustep_tolerance",
-               f"must be >= 0, got {self.ustep_tolerance}")
-        _check(self.refine_levels >= 0, "refine_levels",
-               f"must be >= 0, got {self.refine_levels}")
         _check(self.alternations >= 1, "alternations", f"must be >= 1, got {self.alternations}")
-        _check(
-            self.lowrank_method in ("linear", "exact"),
-            "lowrank_method",
-            f"must be 'linear' or 'exact', got {self.lowrank_method!r}",
-        )
-        _check(
-            self.lowrank_samples >= 0,
-            "lowrank_samples",
-            f"must be >= 0, got {self.lowrank_samples}",
-        )
         _check(
             self.data_prox in ("auto", "exact", "cd"),
             "data_prox",
@@ -215,6 +171,68 @@ class RLRParams(TVL1Params):
             self.init in ("twoframe", "zero"),
             "init",
             f"must be 'twoframe' or 'zero', got {self.init!r}",
+        )
+        _check(self.refine_levels >= 0, "refine_levels",
+               f"must be >= 0, got {self.refine_levels}")
+        _check(self.ustep_tolerance >= 0, "ustep_tolerance",
+               f"must be >= 0, got {self.ustep_tolerance}")
+
+
+@dataclass(frozen=True)
+class RLRParams(MultiFrameParams):
+    """Parameters of Robust Low-Rank trajectories (and those of :class:`MultiFrameParams`).
+
+    Attributes
+    ----------
+    link_weight : float
+        τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
+        the units of the TV weight).  0 decouples the frames (no L-step).  Default 2
+        (tuned on the synthetic suite, see benchmarks/README.md).
+    pcp_scale : float
+        κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
+        standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
+        α.  Larger κ keeps more rank.  Default 1.
+    rank_tol : float
+        Relative singular-value threshold of the L-step's basis: directions of the
+        seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
+        rank is estimated, never given).  Dense estimation noise otherwise enters
+        ``L`` as many tiny singular values.  Default 0.03.
+    lowrank_method : {"linear", "exact"}
+        L-step solver: l1 filtering on a random column sample (linear cost) or full
+        PCP (reference; its L is truncated by the same ``rank_tol`` rule).
+        Default "linear".
+    lowrank_samples : int
+        Columns sampled by the linear L-step; 0 = the solver's default
+        (20 · 2F).  Default 0.
+    seed : int
+        Seed of the L-step's column sampling (local generator).  Default 0.
+    link_edge : bool
+        Scale the link weight by the edge weight g(x) (weaker link across image
+        edges).  Default False.
+    """
+
+    link_weight: float = 2.0
+    pcp_scale: float = 1.0
+    rank_tol: float = 0.03
+    lowrank_method: str = "linear"
+    lowrank_samples: int = 0
+    seed: int = 0
+    link_edge: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check(self.link_weight >= 0, "link_weight", f"must be >= 0, got {self.link_weight}")
+        _check(self.pcp_scale > 0, "pcp_scale", f"must be > 0, got {self.pcp_scale}")
+        _check(0 < self.rank_tol < 1, "rank_tol", f"must be in (0, 1), got {self.rank_tol}")
+        _check(
+            self.lowrank_method in ("linear", "exact"),
+            "lowrank_method",
+            f"must be 'linear' or 'exact', got {self.lowrank_method!r}",
+        )
+        _check(
+            self.lowrank_samples >= 0,
+            "lowrank_samples",
+            f"must be >= 0, got {self.lowrank_samples}",
         )
 
 
@@ -366,8 +384,12 @@ def link_channels(ix: np.ndarray, iy: np.ndarray, a: np.ndarray, lk: np.ndarray 
 
 # ------------------------------------------------------------------------ U-step
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old, s, t, n_sweeps, exact, sc):
-    """Primal step of row ``i``: ``ũ = prox_{sG}(u + s div p)``; ``ubar = 2ũ − u``."""
+def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps, exact, sc):
+    """Primal step of row ``i``: ``ũ = prox_{sG}(u + s div p)``; ``ubar = 2ũ − u``.
+
+    With ``beta > 0``, ``G`` has the extra term ``β/2 |u − m|²``, folded into the prox:
+    ``prox_{sG}(z) = prox_{s' G_0}((z + sβ m) / (1 + sβ))`` with ``s' = s / (1 + sβ)``.
+    """
     w = u.shape[2]
     nk = a.shape[0]
     o1 = old[0]
@@ -379,6 +401,15 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old, s, t, n_sweeps, exact, s
     _primal_row(u, p, i, 1, o2, s)
     d1 = u[0, i]
     d2 = u[1, i]
+    if beta > _F0:
+        sb = s * beta
+        c = _F1 / (_F1 + sb)
+        m1 = m[0, i]
+        m2 = m[1, i]
+        for j in range(w):
+            d1[j] = (d1[j] + sb * m1[j]) * c
+            d2[j] = (d2[j] + sb * m2[j]) * c
+        t = t * c
     if exact:
         bx = sc[0]
         by = sc[1]
@@ -407,8 +438,8 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old, s, t, n_sweeps, exact, s
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
-def ustep_iterations(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweeps, exact,
-                     blocks):
+def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol, n_sweeps,
+                     exact, blocks):
     """Numba primal-dual (Condat / Chambolle-Pock) iterations of one frame's U-step.
 
     Minimises ``λ Σ_k |a_k + (ix_k, iy_k)·u| + Σ_x g (|∇u_1| + |∇u_2|)`` (the data and
@@ -429,6 +460,11 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweep
         Dual variables of the coordinate-descent prox (warm start; unused if ``exact``).
     ubar : (2, H, W) float32
         Scratch for the extrapolated primal ``2ũ − u``.
+    m : (2, H, W) float32
+        Target of the quadratic coupling ``β/2 |u − m|²`` (MFSF's subspace
+        projection); read only if ``beta > 0``.
+    beta : float
+        β ≥ 0; 0 switches the quadratic coupling off.
     lam, s : float
         λ_D and the primal step s; the dual step is ``1 / (8 s)``.
     max_iter : int
@@ -460,8 +496,8 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweep
         for b in nb.prange(n_blk):
             err = 0.0
             for i in range(blocks[b], blocks[b + 1]):
-                err += _ustep_primal_row(ix, iy, a, q, u, p, ubar, i, old[b], s, t, n_sweeps,
-                                         exact, sc[b])
+                err += _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old[b], s, t,
+                                         n_sweeps, exact, sc[b])
             errs[b] = err
         for b in nb.prange(n_blk):
             for i in range(blocks[b], blocks[b + 1]):
@@ -471,8 +507,8 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweep
     return it
 
 
-def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n_sweeps, exact,
-                           blocks=None):
+def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol,
+                           n_sweeps, exact, blocks=None):
     """NumPy reference of :func:`ustep_iterations` (same arguments, in-place updates)."""
     _, h, w = a.shape
     t = float(lam) * float(s)
@@ -483,6 +519,9 @@ def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, lam, s, max_iter, tol, n
         it += 1
         old = u.copy()
         z = np.stack([u[k] + s * divergence(hw(p[2 * k: 2 * k + 2])) for k in (0, 1)])
+        if beta > 0:
+            z = (z + s * beta * m) / (1 + s * beta)
+            t = float(lam) * float(s) / (1 + float(s) * float(beta))
         if exact:
             d = prox_linear_l1_exact(hw(z), hw(a), hw(ix), hw(iy), t)
         else:
@@ -512,10 +551,45 @@ def _resize_dual(p: np.ndarray, shape: tuple[int, int], g: np.ndarray) -> np.nda
     return np.ascontiguousarray(np.moveaxis(q, -1, 0), dtype=np.float32)
 
 
-def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
-              callback: TrackCallback | None = None, engine: str = "numba",
-              stats: dict | None = None) -> np.ndarray:
-    """Robust Low-Rank trajectories (see the module docstring).
+@dataclass
+class Coupling:
+    """How a multi-frame method ties the frames together in the U-step.
+
+    Attributes
+    ----------
+    kind : {"l1", "l2"}
+        ``weight · ||U − T||_1`` (RLR's robust link, exact in the point-wise prox)
+        or ``weight/2 · ||U − T||²`` (MFSF's soft subspace constraint).
+    weight : float
+        τ or β; 0 decouples the frames.
+    target : callable
+        ``target(traj) -> (F, h, w, 2)``: the coupling target ``T`` from the current
+        trajectories at the current level (RLR: the L-step; MFSF: the projection
+        onto the basis), computed before every U-step.
+    edge_scaled : bool
+        Scale an "l1" weight by the edge weight g(x).
+    seconds : float
+        Time spent in ``target`` (filled in by the driver).
+    """
+
+    kind: str
+    weight: float
+    target: Any
+    edge_scaled: bool = False
+    seconds: float = 0.0
+
+
+def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
+                        coupling: Coupling, callback: TrackCallback | None = None,
+                        engine: str = "numba", stats: dict | None = None) -> np.ndarray:
+    """The multi-frame coarse-to-fine driver shared by RLR and MFSF.
+
+    Initialises (``params.init``), then on the finest ``params.refine_levels``
+    levels (every level from zero motion), for every warp: re-warps every frame
+    around its current displacement, linearises its data term, and alternates
+    ``params.alternations`` times the coupling target ``T = coupling.target(U)``
+    with the per-frame primal-dual U-step coupled to ``T``; a median filter follows
+    each warp.
 
     Parameters
     ----------
@@ -523,7 +597,8 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         From :func:`varflow.multiframe.track.check_frames`.
     ref : int
         Reference frame.
-    params : RLRParams
+    params : MultiFrameParams
+    coupling : Coupling
     callback : callable, optional
         ``callback(done, total)`` after each flow of the initialisation and each
         warp of the multi-frame pyramid.
@@ -531,7 +606,7 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         U-step kernel.
     stats : dict, optional
         Filled with ``levels``, ``warps``, ``init_seconds``, ``ustep_seconds``,
-        ``lstep_seconds``, ``seconds``, ``ranks`` (rank found by each L-step).
+        ``coupling_seconds``, ``seconds``.
 
     Returns
     -------
@@ -539,6 +614,8 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
     """
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
+    if coupling.kind not in ("l1", "l2"):
+        raise ValueError(f"coupling: kind must be 'l1' or 'l2', got {coupling.kind!r}")
     stats = {} if stats is None else stats
     t_start = time.perf_counter()
     n_frames, height, width, n_ch = frames.shape
@@ -546,9 +623,11 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
     shapes = pyramid_shapes((height, width), params.max_levels, params.scale_factor,
                             params.min_size)
     n_levels = len(shapes)
-    total_warps = n_levels * params.n_warps
+    n_run = n_levels
+    if params.init == "twoframe" and params.refine_levels > 0:
+        n_run = min(params.refine_levels, n_levels)
     n_init = len(others) if params.init == "twoframe" else 0
-    total = n_init + total_warps
+    total = n_init + n_run * params.n_warps
     done = 0
 
     def tick() -> None:
@@ -563,17 +642,91 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         init = np.zeros((n_frames, height, width, 2), np.float32)
     stats["init_seconds"] = time.perf_counter() - t_start
 
-    pre = [preprocess(frames[n], params) for n in range(n_frames)]
-    pyrs = [build_pyramid(x, shapes, params.scale_factor, params.pyramid_sigma) for x in pre]
-    del pre
+    pyrs = [build_pyramid(preprocess(frames[n], params), shapes[:n_run], params.scale_factor,
+                          params.pyramid_sigma) for n in range(n_frames)]
     lam = np.float32(params.data_weight)
     s = np.float32(params.primal_step)
-    tau = float(params.link_weight)
-    ratio = tau / float(params.data_weight)
+    weight = float(coupling.weight)
+    l1 = coupling.kind == "l1" and weight > 0
+    beta = np.float32(weight if coupling.kind == "l2" else 0.0)
+    ratio = weight / float(params.data_weight)
     exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_ch == 1)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
+    t_u = 0.0
+    coupling.seconds = 0.0
+
+    traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
+    p_all: np.ndarray | None = None
+    for level in range(n_run - 1, -1, -1):
+        h, w = shapes[level]
+        if traj.shape[1:3] != (h, w):
+            traj = np.stack([resize_flow(traj[n], (h, w)) for n in range(n_frames)])
+        i0 = pyrs[ref][level]
+        g = edge_weight(i0, params.edge_weight, params.edge_weight_min)
+        g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
+        if p_all is None:
+            p_all = np.zeros((n_frames, 4, h, w), np.float32)
+        else:
+            p_all = np.stack([_resize_dual(p_all[n], (h, w), g) for n in range(n_frames)])
+        blocks = _row_blocks(h)
+        ubar = np.empty((2, h, w), np.float32)
+        no_target = np.zeros((2, 1, 1), np.float32)
+        planes = {}
+        for n in others:
+            i1 = pyrs[n][level]
+            dx, dy = image_derivatives(i1)
+            planes[n] = np.concatenate([i1, dx, dy], axis=2)
+        ratio_map = ratio * g / np.float32(params.tv_weight) if coupling.edge_scaled else ratio
+        q_all = np.zeros((n_frames, n_ch + (2 if l1 else 0), h, w), np.float32)
+        for _k in range(params.n_warps):
+            lins = {}
+            for n in others:
+                warped, inside = warp_bicubic(planes[n], traj[n])
+                lins[n] = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
+                                    warped[..., 2 * n_ch:], inside, traj[n])
+            for _a in range(params.alternations):
+                t0 = time.perf_counter()
+                target = coupling.target(traj) if weight > 0 else None
+                t1 = time.perf_counter()
+                coupling.seconds += t1 - t0
+                for n in others:  # U-step with the target fixed, frame by frame
+                    tk = None if target is None else np.ascontiguousarray(
+                        np.moveaxis(target[n], -1, 0))
+                    ix, iy, a = link_channels(*lins[n], tk if l1 else None, ratio_map)
+                    m = tk if (tk is not None and not l1) else no_target
+                    u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
+                    kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
+                           params.max_iterations, np.float32(params.ustep_tolerance),
+                           params.data_sweeps, exact, blocks)
+                    traj[n] = np.moveaxis(u, 0, -1)
+                t_u += time.perf_counter() - t1
+            if params.median_size > 1:
+                for n in others:
+                    traj[n] = median_filter_flow(traj[n], params.median_size)
+            tick()
+    stats.update(levels=n_run, warps=n_run * params.n_warps, ustep_seconds=t_u,
+                 coupling_seconds=coupling.seconds, seconds=time.perf_counter() - t_start)
+    log.debug("multi-frame refinement: %d levels, U-step %.2fs, coupling %.2fs", n_run, t_u,
+              coupling.seconds)
+    traj[ref] = 0.0
+    return traj.astype(np.float32, copy=False)
+
+
+def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
+              callback: TrackCallback | None = None, engine: str = "numba",
+              stats: dict | None = None) -> np.ndarray:
+    """Robust Low-Rank trajectories (see the module docstring).
+
+    Arguments as in :func:`refine_trajectories`; ``stats`` also gains
+    ``lstep_seconds`` and ``ranks`` (the rank found by each L-step).
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+    """
+    stats = {} if stats is None else stats
+    tau = float(params.link_weight)
     ranks: list[int] = []
-    t_u = t_l = 0.0
 
     def lstep(traj: np.ndarray) -> np.ndarray:
         umat = trajectories_to_matrix(traj)
@@ -594,61 +747,7 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         out[ref] = 0.0
         return out
 
-    n_run = n_levels
-    if params.init == "twoframe" and params.refine_levels > 0:
-        n_run = min(params.refine_levels, n_levels)
-    total -= (n_levels - n_run) * params.n_warps
-    traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
-    p_all: np.ndarray | None = None
-    for level in range(n_run - 1, -1, -1):
-        h, w = shapes[level]
-        if traj.shape[1:3] != (h, w):
-            traj = np.stack([resize_flow(traj[n], (h, w)) for n in range(n_frames)])
-        i0 = pyrs[ref][level]
-        g = edge_weight(i0, params.edge_weight, params.edge_weight_min)
-        g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
-        if p_all is None:
-            p_all = np.zeros((n_frames, 4, h, w), np.float32)
-        else:
-            p_all = np.stack([_resize_dual(p_all[n], (h, w), g) for n in range(n_frames)])
-        blocks = _row_blocks(h)
-        ubar = np.empty((2, h, w), np.float32)
-        planes = []
-        for n in range(n_frames):
-            i1 = pyrs[n][level]
-            dx, dy = image_derivatives(i1)
-            planes.append(np.concatenate([i1, dx, dy], axis=2))
-        ratio_map = ratio * g / np.float32(params.tv_weight) if params.link_edge else ratio
-        n_k = n_ch + (2 if tau > 0 else 0)
-        q_all = np.zeros((n_frames, n_k, h, w), np.float32)
-        for _k in range(params.n_warps):
-            lins = {}
-            for n in others:
-                warped, inside = warp_bicubic(planes[n], traj[n])
-                lins[n] = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
-                                    warped[..., 2 * n_ch:], inside, traj[n])
-            for _a in range(params.alternations):
-                t0 = time.perf_counter()
-                lmat = lstep(traj) if tau > 0 else None  # L-step on the current U
-                t1 = time.perf_counter()
-                t_l += t1 - t0
-                for n in others:  # U-step with L fixed, frame by frame
-                    lk = None if lmat is None else np.ascontiguousarray(
-                        np.moveaxis(lmat[n], -1, 0))
-                    ix, iy, a = link_channels(*lins[n], lk, ratio_map)
-                    u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
-                    kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, lam, s,
-                           params.max_iterations, np.float32(params.ustep_tolerance),
-                           params.data_sweeps, exact, blocks)
-                    traj[n] = np.moveaxis(u, 0, -1)
-                t_u += time.perf_counter() - t1
-            if params.median_size > 1:
-                for n in others:
-                    traj[n] = median_filter_flow(traj[n], params.median_size)
-            tick()
-    stats.update(levels=n_run, warps=n_run * params.n_warps, ustep_seconds=t_u, lstep_seconds=t_l,
-                 ranks=ranks, seconds=time.perf_counter() - t_start)
-    log.debug("rlr: %d levels, U-step %.2fs, L-step %.2fs, ranks %s", n_levels, t_u, t_l,
-              ranks[-3:])
-    traj[ref] = 0.0
-    return traj.astype(np.float32, copy=False)
+    coupling = Coupling("l1", tau, lstep, edge_scaled=params.link_edge)
+    traj = refine_trajectories(frames, ref, params, coupling, callback, engine, stats)
+    stats.update(lstep_seconds=coupling.seconds, ranks=ranks)
+    return traj
