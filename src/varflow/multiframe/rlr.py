@@ -34,7 +34,10 @@ It is minimised by alternation, after every warp of every pyramid level:
    component pursuit with ``λ = τ / α``, solved in linear time by l1 filtering
    (:func:`varflow.multiframe.lowrank.lowrank_step`).  ``α`` follows from the
    PCP weight ``λ = κ / sqrt(max(2F, N))`` (``κ = pcp_scale``), so that the balance
-   of the two terms does not depend on the size of the pyramid level.
+   of the two terms does not depend on the size of the pyramid level.  The
+   rank is estimated: singular directions below ``rank_tol`` of the largest are
+   dropped, and by default the L-step sees mean velocities (frame n's rows divided
+   by ``|n − ref|``, ``velocity_rows``) so that far frames do not dominate it.
 
 The reference row of ``U`` is zero by definition and kept fixed.  With ``τ = 0``
 the U-step is ``F − 1`` independent two-frame TV-L1 problems.  The trajectories
@@ -209,6 +212,12 @@ class RLRParams(MultiFrameParams):
     link_edge : bool
         Scale the link weight by the edge weight g(x) (weaker link across image
         edges).  Default False.
+    velocity_rows : bool
+        Run the L-step on mean velocities: frame n's rows divided by ``|n − ref|``
+        (then multiplied back), so that far frames, whose displacements are larger,
+        do not dominate the fit; constant-velocity motion becomes rank 2.
+        Default True (synthetic suite: mean EPE 0.0644 against 0.0674 without;
+        RubberWhale frame-11 AEE 0.176 against 0.283).
     """
 
     link_weight: float = 2.0
@@ -218,6 +227,7 @@ class RLRParams(MultiFrameParams):
     lowrank_samples: int = 0
     seed: int = 0
     link_edge: bool = False
+    velocity_rows: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -728,8 +738,13 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
     tau = float(params.link_weight)
     ranks: list[int] = []
 
+    n_frames = frames.shape[0]
+    row_w = np.ones((2 * n_frames, 1), np.float32)
+    if params.velocity_rows:
+        row_w[:, 0] = np.repeat([1.0 / max(abs(n - ref), 1) for n in range(n_frames)], 2)
+
     def lstep(traj: np.ndarray) -> np.ndarray:
-        umat = trajectories_to_matrix(traj)
+        umat = trajectories_to_matrix(traj) * row_w
         kw: dict = {}
         if params.lowrank_method == "linear":
             kw = {"seed": params.seed, "rank_tol": params.rank_tol}
@@ -743,7 +758,7 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
             lm = ((uu[:, keep] * sv[keep]) @ vt[keep]).astype(umat.dtype)
             info["rank"] = int(keep.sum())
         ranks.append(int(info.get("rank", -1)))
-        out = matrix_to_trajectories(lm, traj.shape[1], traj.shape[2])
+        out = matrix_to_trajectories(lm / row_w, traj.shape[1], traj.shape[2])
         out[ref] = 0.0
         return out
 
