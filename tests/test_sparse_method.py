@@ -4,13 +4,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _problems import linearised_sparse_problem
 
 import varflow
 from varflow.evaluation.synthetic import synthetic_pair
-from varflow.ops.differences import image_derivatives
-from varflow.ops.warp import warp_bicubic
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tvl1 import _row_blocks, linearise, planar
+from varflow.twoframe.tvl1 import _row_blocks
 
 
 def aee(a, b):
@@ -18,24 +17,9 @@ def aee(a, b):
 
 
 def _problem(seed=5, shape=(40, 48), aniso=False):
-    f0, f1, gt = synthetic_pair("smooth", shape=shape, magnitude=1.5, channels=3, seed=seed)
-    dx, dy = image_derivatives(f1)
-    flow0 = (0.8 * gt).astype(np.float32)
-    warped, inside = warp_bicubic(np.concatenate([f1, dx, dy], 2), flow0)
-    ix, iy, a = linearise(f0, warped[..., :3], warped[..., 3:6], warped[..., 6:], inside, flow0)
-    h, w = shape
-    rng = np.random.default_rng(seed)
-    g = rng.uniform(0.3, 1.0, (h, w)).astype(np.float32)
-    if aniso:
-        ang = rng.uniform(0, np.pi, (h, w))
-        k = rng.uniform(0, 0.8, (h, w))
-        tens = np.stack([1 - k * np.cos(ang) ** 2, -k * np.cos(ang) * np.sin(ang),
-                         1 - k * np.sin(ang) ** 2]).astype(np.float32)
-    else:
-        tens = np.zeros((3, 1, 1), np.float32)
-    ubar = planar(gt + rng.normal(0, 0.05, gt.shape).astype(np.float32))
-    wsp = np.full((h, w), 0.5, np.float32)
-    return dict(ix=ix, iy=iy, a=a, g=g, tens=tens, aniso=aniso, ubar=ubar, wsp=wsp), planar(flow0)
+    terms, ubar, _, u0 = linearised_sparse_problem(seed, shape, aniso)
+    wsp = np.full(shape, 0.5, np.float32)
+    return dict(terms, aniso=aniso, ubar=ubar, wsp=wsp), u0
 
 
 @pytest.mark.parametrize("aniso", [False, True])
