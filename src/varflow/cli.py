@@ -508,15 +508,30 @@ def _cmd_methods(args: argparse.Namespace) -> int:
     return 0
 
 
+def _checked_methods(value: str, lookup, what: str) -> list[str]:
+    """The ``--methods`` list, each name checked by ``lookup`` (one-line errors)."""
+    methods = _split_list(value)
+    if not methods:
+        raise ValueError(f"--methods: give at least one {what} name")
+    for m in methods:
+        lookup(m)
+    return methods
+
+
+def _write_rows(rows: list, csv_path) -> None:
+    """Write benchmark rows to ``--csv`` when one was given."""
+    from varflow.evaluation.bench import write_csv
+
+    if csv_path is not None:
+        write_csv(rows, csv_path)
+        print(f"wrote {csv_path}")
+
+
 def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench import format_table, run_middlebury, write_csv
+    from varflow.evaluation.bench import format_table, run_middlebury
     from varflow.evaluation.datasets import data_root
 
-    methods = _split_list(args.methods)
-    if not methods:
-        raise ValueError("--methods: give at least one method name")
-    for m in methods:
-        get_method(m)
+    methods = _checked_methods(args.methods, get_method, "method")
     sequences = None
     if args.sequences:
         sequences = [s for item in args.sequences for s in _split_list(item)]
@@ -526,21 +541,14 @@ def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
                           overrides=_given_params(args), progress=not args.quiet)
     print(f"Middlebury frame10 -> frame11, data {root}; seconds exclude JIT warm-up")
     print(format_table(rows))
-    if csv_path is not None:
-        write_csv(rows, csv_path)
-        print(f"wrote {csv_path}")
+    _write_rows(rows, csv_path)
     return 0
 
 
 def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench import write_csv
     from varflow.evaluation.bench_trajectories import format_trajectory_table, run_trajectories
 
-    methods = _split_list(args.methods)
-    if not methods:
-        raise ValueError("--methods: give at least one trajectory method name")
-    for m in methods:
-        get_tracker(m)
+    methods = _checked_methods(args.methods, get_tracker, "trajectory method")
     try:
         h, w = (int(v) for v in args.shape.lower().split("x"))
     except ValueError:
@@ -556,14 +564,11 @@ def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
     print(f"synthetic sequences, {args.frames} frames {w}x{h}, reference = centre; EPE / RMS "
           "in pixels over visible points of all frames but the reference")
     print(format_trajectory_table(rows))
-    if csv_path is not None:
-        write_csv(rows, csv_path)
-        print(f"wrote {csv_path}")
+    _write_rows(rows, csv_path)
     return 0
 
 
 def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench import write_csv
     from varflow.evaluation.bench_multiframe import (
         format_multiframe_table,
         run_middlebury_multiframe,
@@ -572,11 +577,7 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
     )
     from varflow.evaluation.datasets import _HINT, data_root
 
-    methods = _split_list(args.methods)
-    if not methods:
-        raise ValueError("--methods: give at least one trajectory method name")
-    for m in methods:
-        get_tracker(m)
+    methods = _checked_methods(args.methods, get_tracker, "trajectory method")
     csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
     root = data_root(args.data)
     overrides = _given_params(args)
@@ -601,9 +602,7 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
               "over non-occluded ones (report only)")
         print(format_multiframe_table(srows))
         rows = rows + srows
-    if csv_path is not None:
-        write_csv(rows, csv_path)
-        print(f"wrote {csv_path}")
+    _write_rows(rows, csv_path)
     return 0
 
 
