@@ -82,17 +82,18 @@ def _write_sequence(tmp_path: Path, frames: np.ndarray) -> Path:
     return d
 
 
-def test_cli_track_end_to_end(tmp_path, capsys, affine_seq):
+@pytest.mark.parametrize("method", ["chain", "rlr", "mfsf"])
+def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
     s = affine_seq
     d = _write_sequence(tmp_path, s.clean_frames[:5])
     out = tmp_path / "traj.npz"
-    rc = cli.main(["track", str(d), "--ref", "2", "--method", "chain", "-o", str(out),
+    rc = cli.main(["track", str(d), "--ref", "2", "--method", method, "-o", str(out),
                    "--warped", str(tmp_path / "warped"), "--png", str(tmp_path / "png"),
                    "--plot", str(tmp_path / "plot.png"), "--n-warps", "3", "-q"])
     assert rc == 0
-    assert "chain: 5 frames 96x72, reference 2" in capsys.readouterr().out
+    assert f"{method}: 5 frames 96x72, reference 2" in capsys.readouterr().out
     traj, ref, _, meta = read_trajectories(out)
-    assert ref == 2 and traj.shape == (5, 72, 96, 2) and meta["method"] == "chain"
+    assert ref == 2 and traj.shape == (5, 72, 96, 2) and meta["method"] == method
     assert meta["params"]["n_warps"] == 3
     assert len(list((tmp_path / "warped").glob("*.png"))) == 5
     assert len(list((tmp_path / "png").glob("*.png"))) == 5
