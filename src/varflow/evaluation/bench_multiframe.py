@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import TRACKERS, get_tracker, make_track_params
-from .bench import split_overrides
+from ..registry import TRACKERS
+from .bench_trajectories import tracker_params
 from .datasets import (
     _HINT,
     SINTEL_PASSES,
@@ -268,18 +268,6 @@ def _check_crop(crop: Crop | None) -> Crop | None:
     return y0, y1, x0, x1
 
 
-def _prepare_methods(
-    methods: Sequence[str], overrides: Mapping[str, Any] | None
-) -> tuple[list[str], dict[str, Any]]:
-    methods = list(methods)
-    if not methods:
-        raise ValueError("methods: need at least one trajectory method")
-    for m in methods:
-        get_tracker(m)
-    per_method = split_overrides(methods, overrides, registry=TRACKERS)
-    return methods, {m: make_track_params(m, **per_method[m]) for m in methods}
-
-
 def _warm_up(methods: Sequence[str], params: Mapping[str, Any], baseline: bool) -> None:
     """Run every method once on a tiny synthetic clip so JIT compilation is not timed."""
     import varflow
@@ -401,7 +389,7 @@ def run_middlebury_multiframe(
     """
     from tqdm import tqdm
 
-    methods, params = _prepare_methods(default_methods() if methods is None else methods,
+    methods, params = tracker_params(default_methods() if methods is None else methods,
                                        overrides)
     crop = _check_crop(crop)
     frames, ref, gt = load_rubberwhale_clip(root)
@@ -467,7 +455,7 @@ def run_sintel_multiframe(
     """
     from tqdm import tqdm
 
-    methods, params = _prepare_methods(default_methods() if methods is None else methods,
+    methods, params = tracker_params(default_methods() if methods is None else methods,
                                        overrides)
     crop = _check_crop(crop)
     base_dir = data_root(root)

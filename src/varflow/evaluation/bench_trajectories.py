@@ -26,9 +26,36 @@ from .bench import split_overrides
 from .sequences import SCENES, VARIANTS, benchmark_suite
 from .trajectory_metrics import trajectory_errors
 
-__all__ = ["run_trajectories", "format_trajectory_table"]
+__all__ = ["run_trajectories", "format_trajectory_table", "tracker_params"]
 
 log = logging.getLogger(__name__)
+
+
+def tracker_params(
+    methods: Sequence[str], overrides: Mapping[str, Any] | None
+) -> tuple[list[str], dict[str, Any]]:
+    """Check trajectory method names and build each one's parameters.
+
+    ``overrides`` are distributed by :func:`varflow.evaluation.bench.split_overrides`.
+
+    Returns
+    -------
+    methods : list of str
+    params : dict
+        ``{method: params}``.
+
+    Raises
+    ------
+    ValueError
+        No method, an unknown method or parameter, or an invalid value.
+    """
+    methods = list(methods)
+    if not methods:
+        raise ValueError("methods: need at least one trajectory method")
+    for m in methods:
+        get_tracker(m)
+    per_method = split_overrides(methods, overrides, registry=TRACKERS)
+    return methods, {m: make_track_params(m, **per_method[m]) for m in methods}
 
 
 def run_trajectories(
@@ -73,13 +100,7 @@ def run_trajectories(
 
     import varflow
 
-    methods = list(methods)
-    if not methods:
-        raise ValueError("methods: need at least one trajectory method")
-    for m in methods:
-        get_tracker(m)
-    per_method = split_overrides(methods, overrides, registry=TRACKERS)
-    params = {m: make_track_params(m, **per_method[m]) for m in methods}
+    methods, params = tracker_params(methods, overrides)
     rows: list[dict[str, Any]] = []
     n_rows = len(scenes) * len(variants)
     bar = tqdm(total=n_rows * len(methods), desc="trajectories", unit="run", file=sys.stderr,
