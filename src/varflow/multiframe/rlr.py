@@ -105,6 +105,7 @@ __all__ = [
     "ustep_iterations_numpy",
     "prox_faces",
     "link_channels",
+    "set_link_targets",
 ]
 
 log = logging.getLogger(__name__)
@@ -388,8 +389,17 @@ def link_channels(ix: np.ndarray, iy: np.ndarray, a: np.ndarray, lk: np.ndarray 
     ixe[:c], iye[:c], ae[:c] = ix, iy, a
     ixe[c] = r
     iye[c + 1] = r
-    ae[c:] = -r * lk
+    set_link_targets(ae, c, lk, r)
     return ixe, iye, ae
+
+
+def set_link_targets(a: np.ndarray, n_data: int, lk: np.ndarray,
+                     ratio: float | np.ndarray) -> None:
+    """Point the link channels of :func:`link_channels` at new targets, in place.
+
+    ``a[n_data:] = −(τ/λ_D) lk``; the gradients of the link channels do not change.
+    """
+    a[n_data:] = -np.asarray(ratio, np.float32) * lk
 
 
 # ------------------------------------------------------------------------ U-step
@@ -681,6 +691,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         blocks = _row_blocks(h)
         ubar = np.empty((2, h, w), np.float32)
         no_target = np.zeros((2, 1, 1), np.float32)
+        no_link = np.zeros((2, h, w), np.float32)
         planes = {}
         for n in others:
             i1 = pyrs[n][level]
@@ -692,8 +703,10 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
             lins = {}
             for n in others:
                 warped, inside = warp_bicubic(planes[n], traj[n])
-                lins[n] = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
-                                    warped[..., 2 * n_ch:], inside, traj[n])
+                lin = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
+                                warped[..., 2 * n_ch:], inside, traj[n])
+                # link channels built once per warp; their targets change per alternation
+                lins[n] = link_channels(*lin, no_link, ratio_map) if l1 else lin
             for _a in range(params.alternations):
                 t0 = time.perf_counter()
                 target = coupling.target(traj) if weight > 0 else None
@@ -702,7 +715,9 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                 for n in others:  # U-step with the target fixed, frame by frame
                     tk = None if target is None else np.ascontiguousarray(
                         np.moveaxis(target[n], -1, 0))
-                    ix, iy, a = link_channels(*lins[n], tk if l1 else None, ratio_map)
+                    ix, iy, a = lins[n]
+                    if l1 and tk is not None:
+                        set_link_targets(a, n_ch, tk, ratio_map)
                     m = tk if (tk is not None and not l1) else no_target
                     u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
                     kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
