@@ -147,6 +147,16 @@ def test_cli_bench_trajectories(capsys):
                    "--scenes", "affine", "--variants", "clean", "--methods", "chain", "-q"])
     out = capsys.readouterr().out
     assert rc == 0 and "| affine" in out and "chain EPE" in out
+    assert "parameters changed" not in out  # defaults only
     rc = cli.main(["bench", "trajectories", "--shape", "big"])
     err = capsys.readouterr().err
     assert rc == 2 and "--shape" in err and len(err.splitlines()) == 1
+
+
+def test_api_and_cli_share_the_default_method():
+    import inspect
+
+    api_default = inspect.signature(varflow.track).parameters["method"].default
+    track_parser = cli.build_parser()._subparsers._group_actions[0].choices["track"]
+    cli_default = next(a.default for a in track_parser._actions if a.dest == "method")
+    assert api_default == cli_default == "rlr"

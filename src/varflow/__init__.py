@@ -4,7 +4,7 @@ Public API
 ----------
 flow(frame0, frame1, method="tvl1", **params)
     Dense flow ``(H, W, 2)`` float32 from ``frame0`` to ``frame1``.
-track(frames, ref=None, method="chain", **params)
+track(frames, ref=None, method="rlr", **params)
     Dense trajectories ``(F, H, W, 2)`` of the reference frame's pixels.
 methods() / track_methods()
     Names of the registered two-frame / trajectory methods.
@@ -74,7 +74,7 @@ def track_methods() -> list[str]:
 def track(
     frames: Any,
     ref: int | None = None,
-    method: str = "chain",
+    method: str = "rlr",
     *,
     params: Any = None,
     callback: ProgressCallback | None = None,

@@ -183,6 +183,13 @@ def _given_params(args: argparse.Namespace) -> dict[str, Any]:
     return {k[len(_PARAM_PREFIX):]: v for k, v in vars(args).items() if k.startswith(_PARAM_PREFIX)}
 
 
+def _params_note(overrides: Mapping[str, Any]) -> str:
+    """``"; parameters changed: a=1, b=2"`` for a benchmark header ("" when none)."""
+    if not overrides:
+        return ""
+    return "; parameters changed: " + ", ".join(f"{k}={v}" for k, v in sorted(overrides.items()))
+
+
 def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, Any]:
     """The parameter flags given on the command line; each must be a field of ``entry``."""
     given = _given_params(args)
@@ -537,9 +544,11 @@ def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
         sequences = [s for item in args.sequences for s in _split_list(item)]
     csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
     root = data_root(args.data)
+    overrides = _given_params(args)
     rows = run_middlebury(methods, root=root, sequences=sequences,
-                          overrides=_given_params(args), progress=not args.quiet)
-    print(f"Middlebury frame10 -> frame11, data {root}; seconds exclude JIT warm-up")
+                          overrides=overrides, progress=not args.quiet)
+    print(f"Middlebury frame10 -> frame11, data {root}; seconds exclude JIT warm-up"
+          f"{_params_note(overrides)}")
     print(format_table(rows))
     _write_rows(rows, csv_path)
     return 0
@@ -559,10 +568,12 @@ def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
         kw["scenes"] = _split_list(args.scenes)
     if args.variants:
         kw["variants"] = _split_list(args.variants)
+    overrides = _given_params(args)
     rows = run_trajectories(methods, n_frames=args.frames, shape=(h, w),
-                            overrides=_given_params(args), progress=not args.quiet, **kw)
+                            overrides=overrides, progress=not args.quiet, **kw)
     print(f"synthetic sequences, {args.frames} frames {w}x{h}, reference = centre; EPE / RMS "
-          "in pixels over visible points of all frames but the reference")
+          f"in pixels over visible points of all frames but the reference"
+          f"{_params_note(overrides)}")
     print(format_trajectory_table(rows))
     _write_rows(rows, csv_path)
     return 0
@@ -591,7 +602,8 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
             )
     rows = run_middlebury_multiframe(methods, overrides, progress=not args.quiet, root=root)
     print(f"Middlebury RubberWhale frame07-frame14, reference frame10, scored on frame10 -> "
-          f"frame11 (known pixels), data {root}; seconds exclude JIT warm-up")
+          f"frame11 (known pixels), data {root}; seconds exclude JIT warm-up"
+          f"{_params_note(overrides)}")
     print(format_multiframe_table(rows))
     if snippets is not None:
         srows = run_sintel_multiframe(methods, overrides, progress=not args.quiet, root=root,
@@ -599,7 +611,7 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
         print()
         print("MPI-Sintel snippets, reference = the frame with ground truth (and occlusion "
               "mask), scored on reference -> next frame; AEE over valid pixels, AEE noc "
-              "over non-occluded ones (report only)")
+              f"over non-occluded ones (report only){_params_note(overrides)}")
         print(format_multiframe_table(srows))
         rows = rows + srows
     _write_rows(rows, csv_path)

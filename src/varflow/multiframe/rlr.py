@@ -191,7 +191,9 @@ class RLRParams(MultiFrameParams):
     link_weight : float
         τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
         the units of the TV weight).  0 decouples the frames (no L-step).  Default 2
-        (tuned on the synthetic suite, see benchmarks/README.md).
+        (tuned on the synthetic suite of long clips with low-rank motion); short
+        real clips need a far weaker link, about 0.02 (Middlebury RubberWhale, see
+        benchmarks/README.md).
     pcp_scale : float
         κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
         standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
