@@ -715,7 +715,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="accuracy benchmarks", description="Accuracy benchmarks.")
     bsub = p.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True,
                             parser_class=_Parser)
-    b = bsub.add_parser("middlebury", parents=[common],
+    bench_common = _Parser(add_help=False)  # the options every benchmark has
+    bench_common.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
+    bench_common.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    b = bsub.add_parser("middlebury", parents=[common, bench_common],
                         help="the 8 Middlebury sequences with public ground truth",
                         description="AEE/AAE/time per sequence and method (book Table 3.3 "
                         "layout).")
@@ -725,12 +728,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated, from: {', '.join(METHODS)} (default tvl1)")
     b.add_argument("--sequences", nargs="+", metavar="SEQ",
                    help="subset of the sequences (names, space or comma separated)")
-    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
-    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_param_flags(b, params)
     b.set_defaults(func=_cmd_bench_middlebury)
 
-    b = bsub.add_parser("trajectories", parents=[common],
+    b = bsub.add_parser("trajectories", parents=[common, bench_common],
                         help="trajectory methods on the synthetic sequences",
                         description="Trajectory EPE / RMS per scene and variant (book "
                         "Table 4.2 layout) on sequences with exact ground truth.")
@@ -741,15 +742,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--scenes", metavar="NAMES", help="subset: affine,nonrigid,layers")
     b.add_argument("--variants", metavar="NAMES",
                    help="subset: clean,gaussian,saltpepper,occluder")
-    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
-    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
 
     from .evaluation.bench_multiframe import default_methods
 
     mf_default = ",".join(default_methods())
-    b = bsub.add_parser("middlebury-multiframe", parents=[common],
+    b = bsub.add_parser("middlebury-multiframe", parents=[common, bench_common],
                         help="trajectory methods on RubberWhale (8 frames), scored on "
                         "frame10 -> frame11",
                         description="Trajectory methods on Middlebury RubberWhale frame07-"
@@ -762,8 +761,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated, from: {', '.join(TRACKERS)} (default {mf_default})")
     b.add_argument("--sintel", action="store_true",
                    help="also report on the MPI-Sintel snippets found under the data folder")
-    b.add_argument("--csv", metavar="OUT.csv", help="also write the rows as CSV")
-    b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_middlebury_multiframe)
     return parser
