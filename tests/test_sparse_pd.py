@@ -58,8 +58,12 @@ def test_pd_without_sparse_weight_is_tvl1(aniso):
     tvl1_iterations(prob["ix"], prob["iy"], prob["a"], prob["g"], prob["tens"], ref["u"],
                     ref["p"], ref["tp"], ref["q"], np.float32(LAM), np.float32(THETA),
                     np.float32(TAU), 40, np.float32(TOL), 1, aniso, _row_blocks(u0.shape[1]))
+    # The two kernels are compiled separately with fastmath, so the rounding may differ:
+    # measured up to 3e-6 after 40 iterations when one comes from Numba's cache and the
+    # other is freshly compiled (0 when both come from the same state).  A sparse weight
+    # of only w = 1e-3 already moves them apart by 5e-4, so 2e-5 still tests w = 0.
     for key in ("u", "p", "q"):
-        np.testing.assert_allclose(pd[key], ref[key], atol=1e-6)
+        np.testing.assert_allclose(pd[key], ref[key], atol=2e-5)
 
 
 def test_pd_with_a_huge_sparse_weight_returns_ubar():
