@@ -326,6 +326,20 @@ _KKT_TOL = 1e-6  # relative tolerance of the optimality certificate
 
 
 @nb.njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _gram_solve(bx, by, j0, j1, r0, r1):
+    """Solve ``G (y0, y1) = (r0, r1)``, G the Gram matrix of ``b_j0``, ``b_j1``.
+
+    Returns ``(ok, y0, y1)``; ``ok`` is False for (nearly) parallel vectors."""
+    g00 = bx[j0] * bx[j0] + by[j0] * by[j0]
+    g11 = bx[j1] * bx[j1] + by[j1] * by[j1]
+    g01 = bx[j0] * bx[j1] + by[j0] * by[j1]
+    det = g00 * g11 - g01 * g01
+    if det <= 1e-9 * g00 * g11:
+        return False, 0.0, 0.0
+    return True, (g11 * r0 - g01 * r1) / det, (g00 * r1 - g01 * r0) / det
+
+
+@nb.njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _prox_from_duals(z1, z2, bx, by, cc, t, y):
     """Certify the active set read from the duals ``y`` (in/out); float64.
 
@@ -370,17 +384,9 @@ def _prox_from_duals(z1, z2, bx, by, cc, t, y):
         v1 = w1 - t * y0 * bx[j0]
         v2 = w2 - t * y0 * by[j0]
     elif nz == 2:
-        g00 = bx[j0] * bx[j0] + by[j0] * by[j0]
-        g11 = bx[j1] * bx[j1] + by[j1] * by[j1]
-        g01 = bx[j0] * bx[j1] + by[j0] * by[j1]
-        det = g00 * g11 - g01 * g01
-        if det <= 1e-9 * g00 * g11:  # (nearly) parallel lines
-            return False, w1, w2
-        r0 = cc[j0] + bx[j0] * w1 + by[j0] * w2
-        r1 = cc[j1] + bx[j1] * w1 + by[j1] * w2
-        y0 = (g11 * r0 - g01 * r1) / (t * det)
-        y1 = (g00 * r1 - g01 * r0) / (t * det)
-        if abs(y0) > 1.0 + _KKT_TOL or abs(y1) > 1.0 + _KKT_TOL:
+        ok, y0, y1 = _gram_solve(bx, by, j0, j1, (cc[j0] + bx[j0] * w1 + by[j0] * w2) / t,
+                                 (cc[j1] + bx[j1] * w1 + by[j1] * w2) / t)
+        if not ok or abs(y0) > 1.0 + _KKT_TOL or abs(y1) > 1.0 + _KKT_TOL:
             return False, w1, w2
         v1 = w1 - t * (y0 * bx[j0] + y1 * bx[j1])
         v2 = w2 - t * (y0 * by[j0] + y1 * by[j1])
@@ -429,15 +435,11 @@ def _duals_of(v1, v2, z1, z2, bx, by, cc, t, y):
         nn = bx[j0] * bx[j0] + by[j0] * by[j0]
         y[j0] = min(max((rr1 * bx[j0] + rr2 * by[j0]) / nn, -1.0), 1.0)
     elif nz == 2:
-        g00 = bx[j0] * bx[j0] + by[j0] * by[j0]
-        g11 = bx[j1] * bx[j1] + by[j1] * by[j1]
-        g01 = bx[j0] * bx[j1] + by[j0] * by[j1]
-        det = g00 * g11 - g01 * g01
-        if det > 1e-9 * g00 * g11:
-            p0 = rr1 * bx[j0] + rr2 * by[j0]
-            p1 = rr1 * bx[j1] + rr2 * by[j1]
-            y[j0] = min(max((g11 * p0 - g01 * p1) / det, -1.0), 1.0)
-            y[j1] = min(max((g00 * p1 - g01 * p0) / det, -1.0), 1.0)
+        ok, y0, y1 = _gram_solve(bx, by, j0, j1, rr1 * bx[j0] + rr2 * by[j0],
+                                 rr1 * bx[j1] + rr2 * by[j1])
+        if ok:
+            y[j0] = min(max(y0, -1.0), 1.0)
+            y[j1] = min(max(y1, -1.0), 1.0)
 
 
 _EXTRA_SWEEPS = 16  # dual descent sweeps a pixel may take before the enumeration
