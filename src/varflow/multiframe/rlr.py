@@ -489,32 +489,47 @@ def _prox_exact_pixel(z1, z2, bx, by, cc, t, y):
     return v1, v2, True
 
 
+@nb.njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _certify_row(ix, iy, a, q, i, z1, z2, d1, d2, t, sc):
+    """Exact prox of row ``i`` from the duals ``q`` the descent left (in place on d, q).
+
+    ``z1, z2``: the prox argument of the row; ``sc``: (4, K) float64 scratch.
+    Returns the number of pixels whose first active set failed the certificate.
+    """
+    nk = a.shape[0]
+    bx = sc[0]
+    by = sc[1]
+    cc = sc[2]
+    y = sc[3]
+    t64 = np.float64(t)
+    nf = 0
+    for j in range(a.shape[2]):
+        for k in range(nk):
+            bx[k] = ix[k, i, j]
+            by[k] = iy[k, i, j]
+            cc[k] = a[k, i, j]
+            y[k] = q[k, i, j]
+        v1, v2, fell = _prox_exact_pixel(np.float64(z1[j]), np.float64(z2[j]), bx, by, cc,
+                                         t64, y)
+        nf += fell
+        for k in range(nk):
+            q[k, i, j] = y[k]
+        d1[j] = v1
+        d2[j] = v2
+    return nf
+
+
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _prox_certified_kernel(u, a, ix, iy, q, t, n_sweeps, out, fallbacks):
     nk, h, w = a.shape
     for i in nb.prange(h):
-        d1 = u[0, i].copy()
-        d2 = u[1, i].copy()
+        d1 = out[0, i]
+        d2 = out[1, i]
+        d1[:] = u[0, i]
+        d2[:] = u[1, i]
         _data_prox_row(ix, iy, a, q, i, d1, d2, np.float32(t), n_sweeps)
-        bx = np.empty(nk, np.float64)
-        by = np.empty(nk, np.float64)
-        cc = np.empty(nk, np.float64)
-        y = np.empty(nk, np.float64)
-        nf = 0
-        for j in range(w):
-            for k in range(nk):
-                bx[k] = ix[k, i, j]
-                by[k] = iy[k, i, j]
-                cc[k] = a[k, i, j]
-                y[k] = q[k, i, j]
-            v1, v2, fell = _prox_exact_pixel(np.float64(u[0, i, j]), np.float64(u[1, i, j]),
-                                             bx, by, cc, t, y)
-            nf += fell
-            for k in range(nk):
-                q[k, i, j] = y[k]
-            out[0, i, j] = v1
-            out[1, i, j] = v2
-        fallbacks[i] = nf
+        fallbacks[i] = _certify_row(ix, iy, a, q, i, u[0, i], u[1, i], d1, d2, t,
+                                    np.empty((4, nk), np.float64))
 
 
 def prox_certified(u: np.ndarray, a: np.ndarray, ix: np.ndarray, iy: np.ndarray, t: float,
@@ -665,7 +680,6 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
     ``prox_{sG}(z) = prox_{s' G_0}((z + sβ m) / (1 + sβ))`` with ``s' = s / (1 + sβ)``.
     """
     w = u.shape[2]
-    nk = a.shape[0]
     o1 = old[0]
     o2 = old[1]
     for j in range(w):
@@ -692,23 +706,7 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
             b2[j] = d2[j]
     _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
     if exact:  # certify the active set the dual descent found (see prox_certified)
-        bx = sc[0]
-        by = sc[1]
-        cc = sc[2]
-        y = sc[3]
-        t64 = np.float64(t)
-        for j in range(w):
-            for k in range(nk):
-                bx[k] = ix[k, i, j]
-                by[k] = iy[k, i, j]
-                cc[k] = a[k, i, j]
-                y[k] = q[k, i, j]
-            v1, v2, _ = _prox_exact_pixel(np.float64(b1[j]), np.float64(b2[j]), bx, by, cc,
-                                          t64, y)
-            for k in range(nk):
-                q[k, i, j] = y[k]
-            d1[j] = v1
-            d2[j] = v2
+        _certify_row(ix, iy, a, q, i, b1, b2, d1, d2, t, sc)
     err = _F0
     for j in range(w):
         e1 = d1[j] - o1[j]
