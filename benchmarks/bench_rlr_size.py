@@ -40,8 +40,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
-    from varflow.evaluation.sequences import make_sequence
     from varflow.evaluation.trajectory_metrics import trajectory_errors
+    from varflow.generators.sequences import make_sequence
     from varflow.multiframe.track import check_frames
     from varflow.registry import get_tracker, make_track_params
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from varflow.evaluation.synthetic import synthetic_pair
+from varflow.generators.pairs import synthetic_pair
 from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe.tvl1 import linearise, planar

@@ -17,7 +17,7 @@ import pytest
 
 from varflow import cli
 from varflow.evaluation import bench_multiframe as bm
-from varflow.evaluation.sequences import make_sequence
+from varflow.generators.sequences import make_sequence
 from varflow.io import write_flo, write_image
 
 # The cheapest tracker settings: one warp, 5 iterations per level.

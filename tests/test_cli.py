@@ -18,7 +18,7 @@ import pytest
 import varflow
 from varflow import cli, registry
 from varflow.evaluation.metrics import evaluate
-from varflow.evaluation.synthetic import synthetic_pair
+from varflow.generators.pairs import synthetic_pair
 from varflow.io import read_flo, read_flow, read_image, write_flo, write_image
 from varflow.twoframe.coarse_to_fine import CoarseToFineParams
 from varflow.viz import flow_to_color, flow_to_color_with_legend

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import varflow
-from varflow.evaluation.sequences import make_sequence
 from varflow.evaluation.trajectory_metrics import trajectory_errors
+from varflow.generators.sequences import make_sequence
 from varflow.multiframe.lowrank import trajectories_to_matrix
 from varflow.multiframe.mfsf import MFSFParams, dct_basis, pca_basis, track_mfsf
 from varflow.multiframe.rlr import (

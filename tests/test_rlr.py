@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import varflow
-from varflow.evaluation.sequences import make_sequence
 from varflow.evaluation.trajectory_metrics import trajectory_errors
+from varflow.generators.sequences import make_sequence
 from varflow.multiframe.rlr import (
     RLRParams,
     link_channels,

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from varflow.evaluation.sequences import (
+from varflow.evaluation.trajectory_metrics import frame11_flow, trajectory_errors
+from varflow.generators.pairs import TextureField
+from varflow.generators.sequences import (
     SCENES,
     VARIANTS,
     SyntheticSequence,
@@ -16,8 +18,6 @@ from varflow.evaluation.sequences import (
     benchmark_suite,
     make_sequence,
 )
-from varflow.evaluation.synthetic import TextureField
-from varflow.evaluation.trajectory_metrics import frame11_flow, trajectory_errors
 from varflow.ops.warp import warp_bicubic
 
 F, SHAPE = 20, (64, 80)

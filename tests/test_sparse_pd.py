@@ -5,7 +5,7 @@ import pytest
 from _problems import linearised_sparse_problem
 
 import varflow
-from varflow.evaluation.synthetic import synthetic_pair
+from varflow.generators.pairs import synthetic_pair
 from varflow.twoframe import sparse as sp
 from varflow.twoframe.tvl1 import _row_blocks, tvl1_iterations
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import varflow
-from varflow.evaluation.synthetic import synthetic_pair
+from varflow.generators.pairs import synthetic_pair
 from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe import tensor as tensor_mod

@@ -7,8 +7,8 @@ import pytest
 
 import varflow
 from varflow import cli
-from varflow.evaluation.sequences import make_sequence
 from varflow.evaluation.trajectory_metrics import trajectory_errors
+from varflow.generators.sequences import make_sequence
 from varflow.io.trajectories import read_trajectories
 from varflow.multiframe.track import check_frames, compose, default_ref
 from varflow.ops.warp import warp_bicubic

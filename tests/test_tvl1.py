@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import varflow
-from varflow.evaluation.synthetic import TextureField, synthetic_pair
+from varflow.generators.pairs import TextureField, synthetic_pair
 from varflow.twoframe.tvl1 import TVL1Params, solve_warp
 
 

@@ -405,7 +405,7 @@ DEMO_SEED = 4
 def _cmd_demo(args: argparse.Namespace) -> int:
     import varflow
     from varflow.evaluation.metrics import evaluate
-    from varflow.evaluation.synthetic import synthetic_pair
+    from varflow.generators.pairs import synthetic_pair
     from varflow.io import write_flo, write_image
     from varflow.viz import flow_to_color_with_legend
 

@@ -104,7 +104,7 @@ def _warm_up(method: str, params: Any) -> None:
     """Run a method once on a tiny synthetic pair so JIT compilation is not timed."""
     import varflow
 
-    from .synthetic import synthetic_pair
+    from ..generators.pairs import synthetic_pair
 
     f0, f1, _ = synthetic_pair("translation", shape=(32, 40), magnitude=1.0, seed=0)
     varflow.flow(f0, f1, method, params=params)

@@ -177,13 +177,18 @@ def sintel_snippets(
     root: str | os.PathLike[str] | None = None,
     passes: Sequence[str] = SINTEL_PASSES,
     clips: Sequence[str] | None = None,
+    before: int = 1,
+    after: int = 2,
 ) -> list[SintelSnippet]:
     """The Sintel snippets on disk that have ground truth for one of their pairs.
 
-    A snippet is a maximal run of consecutive ``frame_NNNN.png`` of one clip and
-    pass (at least 2 frames).  Its reference N is the first frame with
-    ``flow/<clip>/frame_N.flo`` and N + 1 in the run that also has an occlusion
-    mask, else the first with the flow alone; runs without any such N are skipped.
+    In every maximal run of consecutive ``frame_NNNN.png`` of one clip and pass,
+    the reference N is the first frame with ``flow/<clip>/frame_N.flo`` and N + 1
+    in the run that also has an occlusion mask, else the first with the flow
+    alone; runs without any such N are skipped.  The snippet is the window of the
+    run from ``before`` frames before N to ``after`` frames after it (shorter at
+    the ends of the run): frames 0001-0004 around 0002 by default, also on a clip
+    whose whole 50 frames are on disk.
 
     Parameters
     ----------
@@ -191,6 +196,8 @@ def sintel_snippets(
     passes : sequence of {"clean", "final"}
     clips : sequence of str, optional
         Restrict to these clip names.
+    before, after : int
+        Frames kept before the reference and after it (``after`` >= 1).
 
     Returns
     -------
@@ -200,6 +207,8 @@ def sintel_snippets(
     for p in passes:
         if p not in SINTEL_PASSES:
             raise ValueError(f"passes: expected some of {SINTEL_PASSES}, got {p!r}")
+    if before < 0 or after < 1:
+        raise ValueError(f"before, after: need before >= 0 and after >= 1, got {before}, {after}")
     tr = data_root(root) / "sintel" / "training"
     out = []
     for p in passes:
@@ -221,7 +230,9 @@ def sintel_snippets(
                     continue
                 masked = [i for i in cands
                           if (tr / "occlusions" / d.name / f"frame_{run[i]:04d}.png").is_file()]
-                out.append(SintelSnippet(d.name, p, run, (masked or cands)[0]))
+                i = (masked or cands)[0]
+                lo = max(0, i - before)
+                out.append(SintelSnippet(d.name, p, run[lo:i + after + 1], i - lo))
     return out
 
 
@@ -272,7 +283,7 @@ def _warm_up(methods: Sequence[str], params: Mapping[str, Any], baseline: bool) 
     """Run every method once on a tiny synthetic clip so JIT compilation is not timed."""
     import varflow
 
-    from .synthetic import synthetic_pair
+    from ..generators.pairs import synthetic_pair
 
     f0, f1, _ = synthetic_pair("translation", shape=(48, 64), magnitude=1.0, seed=0)
     if baseline:

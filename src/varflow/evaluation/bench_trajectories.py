@@ -2,7 +2,7 @@
 
 :func:`run_trajectories` runs registered trajectory methods
 (:data:`varflow.registry.TRACKERS`) on the sequences of
-:func:`varflow.evaluation.sequences.benchmark_suite` — every scene under every
+:func:`varflow.generators.sequences.benchmark_suite` — every scene under every
 variant (clean, Gaussian noise, salt & pepper, passing occluder) — and scores them
 with :func:`varflow.evaluation.trajectory_metrics.trajectory_errors` over all frames
 but the reference and the visible pixels.  :func:`format_trajectory_table` prints one
@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from ..generators.sequences import SCENES, VARIANTS, benchmark_suite
 from ..registry import TRACKERS, get_tracker, make_track_params
 from .bench import split_overrides
-from .sequences import SCENES, VARIANTS, benchmark_suite
 from .trajectory_metrics import trajectory_errors
 
 __all__ = ["run_trajectories", "format_trajectory_table", "tracker_params"]

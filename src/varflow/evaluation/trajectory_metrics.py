@@ -89,7 +89,7 @@ def trajectory_errors(
         Estimated and ground-truth displacements relative to the reference frame.
     visibility : ndarray, shape (F, H, W), bool, optional
         Only points where it is True count (e.g.
-        :attr:`~varflow.evaluation.sequences.SyntheticSequence.visibility`);
+        :attr:`~varflow.generators.sequences.SyntheticSequence.visibility`);
         default all.
     exclude_ref : bool
         Leave the reference frame out (its ground truth is zero by definition,

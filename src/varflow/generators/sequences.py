@@ -1,8 +1,8 @@
 """Synthetic image sequences with exact dense trajectories and visibility.
 
-Multi-frame counterpart of :mod:`varflow.evaluation.synthetic`: clips of ``F``
+Multi-frame counterpart of :mod:`varflow.generators.pairs`: clips of ``F``
 frames (typically 20-60) of analytic textures
-(:class:`~varflow.evaluation.synthetic.TextureField`) under known motions, with
+(:class:`~varflow.generators.pairs.TextureField`) under known motions, with
 the exact trajectory of every pixel of a reference frame and whether it is
 visible in each frame.  They follow the idea of the flag
 benchmark of Garg, Roussos & Agapito (a deforming textured surface with ground
@@ -112,7 +112,7 @@ from typing import Any
 
 import numpy as np
 
-from .synthetic import TextureField
+from .pairs import TextureField
 
 __all__ = [
     "SCENES",

@@ -1,0 +1,8 @@
+"""Seeded scene generators with exact ground truth, apart from loaders and runners.
+
+* :mod:`varflow.generators.pairs` — two-frame pairs of an analytic texture under a
+  known motion (:func:`~varflow.generators.pairs.synthetic_pair`).
+* :mod:`varflow.generators.sequences` — multi-frame clips of analytic textures with
+  exact trajectories and visibility (the procedural trajectory suite,
+  :func:`~varflow.generators.sequences.make_sequence`).
+"""
