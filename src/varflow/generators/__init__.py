@@ -5,4 +5,9 @@
 * :mod:`varflow.generators.sequences` — multi-frame clips of analytic textures with
   exact trajectories and visibility (the procedural trajectory suite,
   :func:`~varflow.generators.sequences.make_sequence`).
+* :mod:`varflow.generators.photo` — multi-frame clips of real photographs (bundled
+  with scikit-image), area-sampled under camera motion, waves or moving objects,
+  with illumination change or camera noise, with exact trajectories and
+  visibility; seeded tuning and reporting splits (the generalisation suite,
+  :func:`~varflow.generators.photo.make_photo_clip`).
 """
