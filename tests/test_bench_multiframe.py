@@ -29,10 +29,8 @@ def _u8(img: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
 
 
-@pytest.fixture(scope="module")
-def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A data folder with an 8-frame "RubberWhale" and one 4-frame Sintel snippet."""
-    root = tmp_path_factory.mktemp("data")
+def _write_rubberwhale(root: Path) -> None:
+    """An 8-frame "RubberWhale" (frame07-frame14) with flow10.flo, under ``root``."""
     seq = make_sequence("affine", n_frames=8, shape=(48, 64), ref=3, magnitude=3.0, seed=2)
     d = root / "middlebury" / "other-data" / "RubberWhale"
     d.mkdir(parents=True)
@@ -43,6 +41,12 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (root / "middlebury" / "other-gt-flow" / "RubberWhale").mkdir(parents=True)
     write_flo(root / "middlebury" / "other-gt-flow" / "RubberWhale" / "flow10.flo", gt)
 
+
+@pytest.fixture(scope="module")
+def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data folder with an 8-frame "RubberWhale" and one 4-frame Sintel snippet."""
+    root = tmp_path_factory.mktemp("data")
+    _write_rubberwhale(root)
     s = make_sequence("affine", n_frames=4, shape=(40, 56), ref=1, magnitude=2.0, seed=3)
     tr = root / "sintel" / "training"
     for sub in ("clean/fake_1", "flow/fake_1", "occlusions/fake_1", "invalid/fake_1"):
@@ -55,6 +59,51 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     occ[:, -6:] = 255
     write_image(tr / "occlusions" / "fake_1" / "frame_0002.png", occ)
     write_image(tr / "invalid" / "fake_1" / "frame_0002.png", np.zeros((40, 56), np.uint8))
+    return root
+
+
+# The fake alley_1: 20 frames of a smooth texture translating by ALLEY_V px per frame, so
+# the ground-truth flow of every frame is exactly ALLEY_V everywhere.
+ALLEY_FRAMES, ALLEY_SHAPE, ALLEY_V = 20, (48, 64), (0.8, -0.5)
+ALLEY_GT = range(1, 11)  # frame_0001.flo ... frame_0010.flo, as on the real clip
+ALLEY_MASKED = 6  # the frame with occlusion and invalid masks
+
+
+def _texture(shape: tuple[int, int], shift: tuple[float, float], seed: int = 0) -> np.ndarray:
+    """A smooth colour texture (sum of plane waves) translated by ``shift`` = (x, y)."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    x, y = x - shift[0], y - shift[1]
+    img = np.full(shape + (3,), 0.5)
+    for c in range(3):
+        for _ in range(6):
+            a, f, ph = rng.uniform(0, np.pi), rng.uniform(0.15, 0.45), rng.uniform(0, 2 * np.pi)
+            img[..., c] += 0.075 * np.sin(f * (np.cos(a) * x + np.sin(a) * y) + ph)
+    return _u8(img)
+
+
+@pytest.fixture(scope="module")
+def alley_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data folder with a fake 20-frame final/alley_1 and the fake RubberWhale."""
+    root = tmp_path_factory.mktemp("alley")
+    _write_rubberwhale(root)
+    tr = root / "sintel" / "training"
+    for sub in ("final", "flow", "occlusions", "invalid"):
+        (tr / sub / "alley_1").mkdir(parents=True)
+    for n in range(1, ALLEY_FRAMES + 1):
+        shift = ((n - 1) * ALLEY_V[0], (n - 1) * ALLEY_V[1])
+        write_image(tr / "final" / "alley_1" / f"frame_{n:04d}.png", _texture(ALLEY_SHAPE, shift))
+    gt = np.empty(ALLEY_SHAPE + (2,), np.float32)
+    gt[...] = ALLEY_V
+    gt[-3:, -3:] = 1e10  # unknown pixels
+    for n in ALLEY_GT:
+        write_flo(tr / "flow" / "alley_1" / f"frame_{n:04d}.flo", gt)
+    occ = np.zeros(ALLEY_SHAPE, np.uint8)
+    occ[:, -6:] = 255
+    inv = np.zeros(ALLEY_SHAPE, np.uint8)
+    inv[:4, :4] = 255
+    write_image(tr / "occlusions" / "alley_1" / f"frame_{ALLEY_MASKED:04d}.png", occ)
+    write_image(tr / "invalid" / "alley_1" / f"frame_{ALLEY_MASKED:04d}.png", inv)
     return root
 
 
@@ -145,6 +194,201 @@ def test_runner_on_cropped_rubberwhale(data_root: Path) -> None:
     assert [r["method"] for r in rows] == ["twoframe", bm.BASELINE_LABEL]
     for r in rows:
         assert math.isfinite(r["aee"]) and 0 < r["aee"] < 1.0, r
+
+
+# ----------------------------------------------------------------------------- Table 4.1 protocol
+
+
+def test_protocol_window_centred_shifted_and_whole() -> None:
+    w = bm.protocol_window(10, 9, 1, 50)  # centred: 4 frames either side
+    assert (w.first, w.last, w.length, w.n_frames, w.ref_index) == (6, 14, 9, 9, 4)
+    assert w.label == "9: 0006-0014" and w.numbers == tuple(range(6, 15))
+    # even lengths keep one frame more after r: L = 2 is the pair r, r + 1
+    assert (bm.protocol_window(10, 2, 1, 50).first, bm.protocol_window(10, 2, 1, 50).last) \
+        == (10, 11)
+    assert bm.protocol_window(10, 4, 1, 50).label == "4: 0009-0012"
+    # shifted inward at the clip's start and end
+    assert bm.protocol_window(2, 9, 1, 50).label == "9: 0001-0009"
+    assert bm.protocol_window(1, 13, 1, 50).label == "13: 0001-0013"
+    assert bm.protocol_window(48, 9, 1, 50).label == "9: 0042-0050"
+    assert bm.protocol_window(49, 19, 1, 50).label == "19: 0032-0050"
+    assert bm.protocol_window(9, 3, 8, 11).label == "3: 0008-0010"  # a clip not from 1
+    whole = bm.protocol_window(5, None, 1, 50)
+    assert (whole.first, whole.last, whole.length, whole.ref_index) == (1, 50, None, 4)
+    assert whole.label == "whole: 0001-0050"
+    # every placement: inside the clip, of the asked length, holding r and r + 1, and
+    # exactly centred whenever the clip allows
+    for n in (2, 5, 12):
+        for r in range(1, n):
+            for length in range(2, n + 1):
+                w = bm.protocol_window(r, length, 1, n)
+                assert 1 <= w.first and w.last <= n and w.n_frames == length
+                assert w.first <= r and r + 1 <= w.last
+                lo = r - (length - 1) // 2
+                if lo >= 1 and lo + length - 1 <= n:
+                    assert w.first == lo
+
+
+def test_protocol_window_errors() -> None:
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        bm.protocol_window(5, 1, 1, 50)
+    with pytest.raises(ValueError, match="exceeds the 50 frames"):
+        bm.protocol_window(5, 51, 1, 50)
+    for r in (0, 50, 51):
+        with pytest.raises(ValueError, match=r"refs: .*1\.\.49"):
+            bm.protocol_window(r, 9, 1, 50)
+    with pytest.raises(ValueError, match="integer"):
+        bm.protocol_window(True, 9, 1, 50)
+
+
+def test_protocol_windows_defaults() -> None:
+    labels = [w.label for w in bm.protocol_windows(5, bm.PROTOCOL_WINDOWS, 1, 50)]
+    assert labels == ["9: 0001-0009", "13: 0001-0013", "19: 0001-0019", "whole: 0001-0050"]
+    labels = [w.label for w in bm.protocol_windows(10, bm.PROTOCOL_WINDOWS, 1, 50)]
+    assert labels == ["9: 0006-0014", "13: 0004-0016", "19: 0001-0019", "whole: 0001-0050"]
+    assert [w.label for w in bm.protocol_windows(5, (9, 9), 1, 50, include_whole=False)] \
+        == ["9: 0001-0009"]
+    with pytest.raises(ValueError, match="at least one window"):
+        bm.protocol_windows(5, (), 1, 50, include_whole=False)
+
+
+def test_plan_on_fake_alley(alley_root: Path, tmp_path: Path) -> None:
+    assert bm.sintel_clip_numbers(alley_root) == tuple(range(1, 21))
+    plan = bm.plan_sintel_protocol(alley_root, refs=(5, 6, 5), windows=(3, 5))
+    assert list(plan) == [5, 6]
+    assert [w.label for w in plan[5]] == ["3: 0004-0006", "5: 0003-0007", "whole: 0001-0020"]
+    for r, match in ((0, "needs frames 0 and 1"), (20, "needs frames 20 and 21"),
+                     (12, r"no ground truth for reference frame 12.*0001-0010")):
+        with pytest.raises(ValueError, match=match):
+            bm.plan_sintel_protocol(alley_root, refs=(5, r))
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        bm.plan_sintel_protocol(alley_root, windows=(9, 1))
+    with pytest.raises(ValueError, match="exceeds the 20 frames"):
+        bm.plan_sintel_protocol(alley_root, windows=(21,))
+    with pytest.raises(FileNotFoundError, match="alley_1 frames not found.*VARFLOW_DATA"):
+        bm.plan_sintel_protocol(tmp_path)
+
+
+def test_crop_outside_the_frames(alley_root: Path) -> None:
+    with pytest.raises(ValueError, match="crop.*exceeds the 64x48 frames of Sintel"):
+        bm.run_sintel_trajectories(["twoframe"], root=alley_root, crop=(0, 60, 0, 32),
+                                   progress=False, warm_up=False)
+    with pytest.raises(ValueError, match="crop.*exceeds the 64x48 frames of Middlebury"):
+        bm.run_middlebury_multiframe(["twoframe"], root=alley_root, crop=(0, 32, 0, 70),
+                                     progress=False, warm_up=False)
+
+
+def test_sintel_trajectories_rows_on_fake_alley(alley_root: Path) -> None:
+    methods = [m for m in ("twoframe", "mfsf", "rlr") if m in bm.default_methods()]
+    rows = bm.run_sintel_trajectories(methods, CHEAP, progress=False, root=alley_root,
+                                      refs=(5, ALLEY_MASKED), windows=(3,))
+    windows = {5: [("3: 0004-0006", 3, 1), ("whole: 0001-0020", 20, 4)],
+               6: [("3: 0005-0007", 3, 1), ("whole: 0001-0020", 20, 5)]}
+    expected = [(r, w, m) for r in (5, 6) for w in windows[r] for m in methods]
+    assert [(r["ref"], (r["window"], r["frames"], r["ref_index"]), r["method"]) for r in rows] \
+        == expected
+    for r in rows:
+        assert set(r) == {"dataset", "sequence", "ref", "pair", "window", "frames", "ref_index",
+                          "method", "aee", "aae", "aee_noc", "seconds", "shared"}
+        assert r["dataset"] == "sintel-final" and r["sequence"] == "alley_1"
+        assert r["pair"] == f"{r['ref']:04d}->{r['ref'] + 1:04d}"
+        assert r["shared"] is (r["method"] == "twoframe")
+        assert math.isfinite(r["aee"]) and math.isfinite(r["aae"]) and r["seconds"] >= 0
+        assert r["aee"] < 0.3, r  # a smooth translation of 0.94 px per frame
+        if r["ref"] == ALLEY_MASKED:
+            assert math.isfinite(r["aee_noc"])
+        else:
+            assert r["aee_noc"] is None
+
+
+def test_twoframe_runs_once_per_reference(alley_root: Path,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    import varflow
+
+    calls: list[tuple[str, int, int]] = []
+    track = varflow.track
+
+    def counting(frames, ref, method, **kw):  # noqa: ANN001, ANN202 - a test double
+        calls.append((method, len(frames), ref))
+        return track(frames, ref, method, **kw)
+
+    monkeypatch.setattr(varflow, "track", counting)
+    rows = bm.run_sintel_trajectories(["twoframe", "mfsf"], CHEAP, progress=False,
+                                      root=alley_root, refs=(5, 6), windows=(3, 5),
+                                      warm_up=False)
+    # twoframe: once per reference on the pair (r, r + 1); mfsf: once per window
+    assert [c for c in calls if c[0] == "twoframe"] == [("twoframe", 2, 0)] * 2
+    assert [c for c in calls if c[0] == "mfsf"] == [("mfsf", n, i) for n, i in
+                                                    ((3, 1), (5, 2), (20, 4),
+                                                     (3, 1), (5, 2), (20, 5))]
+    for ref in (5, 6):
+        mine = [r for r in rows if r["method"] == "twoframe" and r["ref"] == ref]
+        assert len(mine) == 3 and all(r["shared"] for r in mine)
+        assert len({(r["aee"], r["aae"], r["seconds"]) for r in mine}) == 1
+        assert len({r["window"] for r in mine}) == 3
+    assert not any(r["shared"] for r in rows if r["method"] == "mfsf")
+    # the premise: twoframe's frame r + 1 on a window is the flow of the pair r, r + 1
+    monkeypatch.setattr(varflow, "track", track)
+    from varflow.io import read_image
+
+    d = alley_root / "sintel" / "training" / "final" / "alley_1"
+    frames = np.stack([read_image(d / f"frame_{n:04d}.png") for n in range(4, 9)])
+    window = varflow.track(frames, 2, "twoframe", **CHEAP)
+    pair = varflow.track(frames[2:4], 0, "twoframe", **CHEAP)
+    np.testing.assert_allclose(window[3], pair[1], atol=1e-5)
+
+
+@pytest.mark.data
+def test_sintel_trajectories_cropped_real_alley(data_root: Path) -> None:
+    rows = bm.run_sintel_trajectories(["twoframe"], CHEAP, progress=False, root=data_root,
+                                      refs=(2,), windows=(3,), include_whole=False,
+                                      crop=(150, 246, 400, 528), warm_up=False)
+    (row,) = rows
+    assert (row["ref"], row["window"], row["frames"], row["ref_index"]) \
+        == (2, "3: 0001-0003", 3, 1)
+    assert row["shared"] and row["pair"] == "0002->0003"
+    assert math.isfinite(row["aee"]) and 0 < row["aee"] < 2.0, row
+    assert math.isfinite(row["aee_noc"])  # frame 2 has the occlusion mask
+
+
+def _protocol_rows() -> list[dict]:
+    aee = {  # (ref, window) -> (twoframe, mfsf, rlr)
+        (5, "3: 0004-0006"): (1.0, 0.8, 0.5),
+        (5, "whole: 0001-0020"): (1.0, 1.1, 0.9),
+        (6, "3: 0005-0007"): (2.0, 2.5, 1.0),
+        (6, "whole: 0001-0020"): (2.0, 2.1, 1.5),
+    }
+    rows = []
+    for (ref, window), vals in aee.items():
+        for m, v in zip(("twoframe", "mfsf", "rlr"), vals, strict=True):
+            rows.append({"ref": ref, "window": window, "frames": 3 if window[0] == "3" else 20,
+                         "method": m, "aee": v, "seconds": 1.0, "shared": m == "twoframe"})
+    return rows
+
+
+def test_protocol_table_format() -> None:
+    text = bm.format_protocol_table(_protocol_rows())
+    lines = text.splitlines()
+    table = [ln for ln in lines if ln.startswith("|")]
+    assert table[0].startswith("| ref") and "| window" in table[0]
+    for h in ("twoframe AEE", "mfsf AEE", "mfsf / twoframe", "rlr AEE", "rlr / twoframe"):
+        assert h in table[0], h
+    assert "twoframe / twoframe" not in table[0]
+    assert set(table[1]) <= {"|", "-", ":"}
+    assert len(table) == 2 + 4 + 2 + 1  # header, rule, 4 lines, 2 reference means, overall
+    assert len({len(ln) for ln in table}) == 1  # aligned
+    assert "3: 0004-0006" in table[2] and "0.8000" in table[2] and "0.800" in table[2]
+    ref5 = next(ln for ln in table if ln.startswith("| 5 ") and "mean of 2 windows" in ln)
+    assert "0.9500" in ref5 and "0.7000" in ref5  # mfsf and rlr means over the windows
+    assert table[-1].startswith("| all") and "mean of 4 lines" in table[-1]
+    assert "mfsf beats twoframe at 1 of 2 references (5)" in text
+    assert "rlr beats twoframe at 2 of 2 references (5, 6)" in text
+    assert "twoframe: one run per reference" in text
+    assert "twoframe 2.0 s in 2 runs" in text and "mfsf 4.0 s in 4 runs" in text
+    # without the baseline: no ratios, and it says so
+    text = bm.format_protocol_table([r for r in _protocol_rows() if r["method"] != "twoframe"])
+    assert "/ twoframe" not in text and "no twoframe rows" in text
+    assert bm.format_protocol_table([]) == "(no results)"
 
 
 # ----------------------------------------------------------------------------- table
@@ -253,3 +497,66 @@ def test_rlr_weak_link_beats_the_pair_on_rubberwhale(data_root: Path) -> None:
     assert 0.095 < pair["aee"] < 0.103, pair
     assert rlr["aee"] < pair["aee"] - 0.0008, (rlr["aee"], pair["aee"])
     assert rlr["aae"] < pair["aae"], (rlr["aae"], pair["aae"])
+
+
+def test_cli_sintel_trajectories(capsys: pytest.CaptureFixture[str], alley_root: Path,
+                                 tmp_path: Path) -> None:
+    csv = tmp_path / "rows.csv"
+    rc, out, err = _run(capsys, "bench", "sintel-trajectories", "--data", str(alley_root),
+                        "--methods", "twoframe,mfsf", "--refs", "5", "6", "--windows", "3",
+                        "--no-whole", "--quiet", "--csv", str(csv), *CHEAP_FLAGS)
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert lines[0].startswith("MPI-Sintel final/alley_1 frames 0001-0020"), lines[0]
+    assert lines[0].endswith("parameters changed: max_iterations=5, n_warps=1"), lines[0]
+    assert lines[1].startswith("| ref") and "mfsf / twoframe" in lines[1]
+    assert any(ln.startswith("| 5 ") and "3: 0004-0006" in ln for ln in lines)
+    assert any(ln.startswith("mfsf beats twoframe at ") for ln in lines)
+    # then the RubberWhale table
+    rw = next(i for i, ln in enumerate(lines) if ln.startswith("Middlebury RubberWhale"))
+    assert lines[rw + 1].startswith("| dataset")
+    assert any("RubberWhale" in ln and bm.BASELINE_LABEL in ln for ln in lines[rw:])
+    assert csv.is_file() and len(csv.read_text().splitlines()) == 1 + 2 * 2 + 3
+
+    rc, out, err = _run(capsys, "bench", "sintel-trajectories", "--data", str(alley_root),
+                        "--methods", "twoframe", "--refs", "6", "--windows", "2",
+                        "--crop", "0", "32", "8", "56", "--no-rubberwhale", "-q", *CHEAP_FLAGS)
+    assert rc == 0, err
+    assert "cropped to rows 0:32, columns 8:56" in out and "RubberWhale" not in out
+    assert "| 6   | 2: 0006-0007" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (["--refs", "0"], ["refs", "frames 0 and 1"]),
+        (["--refs", "5", "20"], ["refs", "frames 20 and 21"]),
+        (["--refs", "12"], ["refs", "no ground truth", "0001-0010"]),
+        (["--windows", "1"], ["windows", "at least 2 frames"]),
+        (["--windows", "21"], ["windows", "exceeds the 20 frames"]),
+        (["--refs", "five"], ["--refs"]),
+        (["--crop", "0", "99", "0", "10"], ["crop"]),
+        (["--methods", "twoframe,nope"], ["nope"]),
+    ],
+)
+def test_cli_sintel_trajectories_bad_args_one_line(
+    capsys: pytest.CaptureFixture[str], alley_root: Path, args: list[str], needles: list[str]
+) -> None:
+    rc, out, err = _run(capsys, "bench", "sintel-trajectories", "--data", str(alley_root),
+                        "--methods", "twoframe", "--quiet", *args)
+    _one_line_error(rc, err, *needles)
+    assert out == ""
+
+
+def test_cli_sintel_trajectories_missing_data_one_line(
+    capsys: pytest.CaptureFixture[str], alley_root: Path, tmp_path: Path
+) -> None:
+    rc, _, err = _run(capsys, "bench", "sintel-trajectories", "--data", str(tmp_path),
+                      "--methods", "twoframe", "--quiet")
+    _one_line_error(rc, err, "alley_1", "VARFLOW_DATA")
+    # Sintel present, RubberWhale missing: fails before the Sintel run
+    (tmp_path / "sintel").symlink_to(alley_root / "sintel", target_is_directory=True)
+    rc, out, err = _run(capsys, "bench", "sintel-trajectories", "--data", str(tmp_path),
+                        "--methods", "twoframe", "--quiet")
+    _one_line_error(rc, err, "RubberWhale", "VARFLOW_DATA")
+    assert out == ""

@@ -12,6 +12,10 @@ Synopsis::
                              [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
     varflow bench middlebury-multiframe [--data DIR] [--methods rlr,twoframe,...]
                              [--sintel] [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
+    varflow bench sintel-trajectories [--data DIR] [--methods twoframe,mfsf,rlr]
+                             [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
+                             [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
+                             [--quiet] [--<parameter> VALUE ...]
 
 Method parameters become flags automatically: every field of the parameter
 dataclass of every registered method is offered as ``--field-name`` (booleans as
@@ -618,6 +622,58 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_sintel_trajectories(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench_multiframe import (
+        PROTOCOL_CLIP,
+        PROTOCOL_PASS,
+        format_multiframe_table,
+        format_protocol_table,
+        load_rubberwhale_clip,
+        plan_sintel_protocol,
+        run_middlebury_multiframe,
+        run_sintel_trajectories,
+        sintel_clip_numbers,
+    )
+    from varflow.evaluation.datasets import data_root
+
+    methods = _checked_methods(args.methods, get_tracker, "trajectory method")
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    overrides = _given_params(args)
+    crop = tuple(args.crop) if args.crop else None
+    # fail before the long run: bad references or windows, missing data
+    plan = plan_sintel_protocol(root, refs=args.refs, windows=args.windows,
+                                include_whole=not args.no_whole)
+    numbers = sintel_clip_numbers(root)
+    if not args.no_rubberwhale:
+        h, w = load_rubberwhale_clip(root)[0].shape[1:3]
+        if crop is not None and (crop[1] > h or crop[3] > w):
+            raise ValueError(f"--crop: {' '.join(map(str, crop))} exceeds the {w}x{h} "
+                             f"RubberWhale frames (give --no-rubberwhale to skip them)")
+    rows = run_sintel_trajectories(methods, overrides, progress=not args.quiet, root=root,
+                                   refs=list(plan), windows=args.windows,
+                                   include_whole=not args.no_whole, crop=crop)
+    crop_note = ""
+    if crop is not None:
+        crop_note = f", cropped to rows {crop[0]}:{crop[1]}, columns {crop[2]}:{crop[3]}"
+    print(f"MPI-Sintel {PROTOCOL_PASS}/{PROTOCOL_CLIP} frames {numbers[0]:04d}-{numbers[-1]:04d}"
+          f"{crop_note} (book Table 4.1 protocol): from reference r every method tracks "
+          f"through the window; AEE (px, valid pixels) of its frame r+1 displacement against "
+          f"flow r -> r+1, ratio to twoframe (< 1: better); data {root}; seconds exclude JIT "
+          f"warm-up{_params_note(overrides)}")
+    print(format_protocol_table(rows))
+    if not args.no_rubberwhale:
+        mrows = run_middlebury_multiframe(methods, overrides, progress=not args.quiet,
+                                          root=root, crop=crop, warm_up=False)
+        print()
+        print(f"Middlebury RubberWhale frame07-frame14{crop_note}, reference frame10, scored "
+              f"on frame10 -> frame11 (known pixels){_params_note(overrides)}")
+        print(format_multiframe_table(mrows))
+        rows = rows + mrows
+    _write_rows(rows, csv_path)
+    return 0
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -763,6 +819,41 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also report on the MPI-Sintel snippets found under the data folder")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_middlebury_multiframe)
+
+    from .evaluation.bench_multiframe import PROTOCOL_METHODS, PROTOCOL_REFS, PROTOCOL_WINDOWS
+
+    st_default = ",".join(m for m in PROTOCOL_METHODS if m in TRACKERS)
+    b = bsub.add_parser("sintel-trajectories", parents=[common, bench_common],
+                        help="book Table 4.1 protocol on MPI-Sintel alley_1 (50 frames), "
+                        "plus RubberWhale frame 11",
+                        description="For every reference frame r and every window of the "
+                        "50-frame MPI-Sintel final/alley_1 clip around r (centred as far as "
+                        "the clip allows, plus the whole clip), every trajectory method "
+                        "tracks r's pixels through the window; its frame r+1 displacement "
+                        "is scored against flow/alley_1/frame_r.flo.  twoframe (TV-L1 r -> "
+                        "r+1, independent of the window) runs once per reference.  Then "
+                        "the RubberWhale frame-11 table.  At full resolution the default "
+                        "run takes about an hour of 2 cores.")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    b.add_argument("--methods", default=st_default, metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default {st_default})")
+    b.add_argument("--refs", nargs="+", type=int, default=list(PROTOCOL_REFS), metavar="R",
+                   help="reference frame numbers, 1-based; each needs frame R+1 and "
+                   "flow/alley_1/frame_R.flo (default "
+                   f"{' '.join(map(str, PROTOCOL_REFS))})")
+    b.add_argument("--windows", nargs="+", type=int, default=list(PROTOCOL_WINDOWS),
+                   metavar="L", help="window lengths in frames, each >= 2 (default "
+                   f"{' '.join(map(str, PROTOCOL_WINDOWS))})")
+    b.add_argument("--no-whole", action="store_true",
+                   help="skip the whole-clip window")
+    b.add_argument("--crop", nargs=4, type=int, metavar=("Y0", "Y1", "X0", "X1"),
+                   help="run on rows Y0:Y1, columns X0:X1 of the frames only (quick runs; "
+                   "also applied to RubberWhale)")
+    b.add_argument("--no-rubberwhale", action="store_true",
+                   help="skip the RubberWhale frame-11 table")
+    _add_param_flags(b, tparams, n_methods=len(TRACKERS))
+    b.set_defaults(func=_cmd_bench_sintel_trajectories)
     return parser
 
 
