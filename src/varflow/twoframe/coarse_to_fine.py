@@ -33,7 +33,14 @@ from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_flow
 from ..ops.rof import structure_texture
 from ..ops.warp import warp_bicubic
 
-__all__ = ["CoarseToFineParams", "WarpSolver", "coarse_to_fine", "ProgressCallback"]
+__all__ = [
+    "CoarseToFineParams",
+    "WarpSolver",
+    "coarse_to_fine",
+    "coarse_to_fine_pyramids",
+    "prepare_pyramid",
+    "ProgressCallback",
+]
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +160,31 @@ def preprocess(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
     return image
 
 
+def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
+                    shapes: list[tuple[int, int]] | None = None) -> list[np.ndarray]:
+    """Pre-process one ``(H, W, C)`` float frame and build its pyramid (finest first).
+
+    The inputs of :func:`coarse_to_fine_pyramids`; a multi-frame method builds each
+    frame's pyramid once and pairs it with several others.
+
+    Parameters
+    ----------
+    frame : ndarray, shape (H, W, C), float32 in [0, 1]
+    params : CoarseToFineParams
+    shapes : list of (int, int), optional
+        Level shapes; default :func:`varflow.ops.pyramid.pyramid_shapes` of ``params``.
+
+    Returns
+    -------
+    list of ndarray, each (h, w, C) float32
+    """
+    if shapes is None:
+        shapes = pyramid_shapes(frame.shape[:2], params.max_levels, params.scale_factor,
+                                params.min_size)
+    return build_pyramid(preprocess(frame, params), shapes, params.scale_factor,
+                         params.pyramid_sigma)
+
+
 def coarse_to_fine(
     frame0: np.ndarray,
     frame1: np.ndarray,
@@ -161,6 +193,7 @@ def coarse_to_fine(
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
+    levels: int | None = None,
 ) -> np.ndarray:
     """Estimate the flow from ``frame0`` to ``frame1`` coarse to fine.
 
@@ -172,13 +205,16 @@ def coarse_to_fine(
         The method's single-level, single-warp solver (see module docstring).
     params : CoarseToFineParams (or a subclass)
     init_flow : ndarray, shape (H, W, 2), optional
-        Initial flow at full resolution; it is downsampled to the coarsest level.
+        Initial flow at full resolution; it is downsampled to the coarsest level run.
     callback : callable, optional
         ``callback(done, total)`` after each warp.
     stats : dict, optional
         Filled with counters and per-stage seconds: ``levels``, ``warps``,
         ``seconds`` and whatever the solver records (it sees the same dict as
         ``state["stats"]``, e.g. the sparse method's ``sparse_seconds``).
+    levels : int, optional
+        Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
+        default all.
 
     Returns
     -------
@@ -187,19 +223,55 @@ def coarse_to_fine(
     """
     I0, I1 = check_pair(frame0, frame1)
     t_start = time.perf_counter()
-    I0 = preprocess(I0, params)
-    I1 = preprocess(I1, params)
     shapes = pyramid_shapes(I0.shape[:2], params.max_levels, params.scale_factor, params.min_size)
-    pyr0 = build_pyramid(I0, shapes, params.scale_factor, params.pyramid_sigma)
-    pyr1 = build_pyramid(I1, shapes, params.scale_factor, params.pyramid_sigma)
-    n_levels = len(shapes)
+    if levels is not None:
+        _check(levels >= 1, "levels", f"must be >= 1, got {levels}")
+        shapes = shapes[:levels]
+    pyr0 = prepare_pyramid(I0, params, shapes)
+    pyr1 = prepare_pyramid(I1, params, shapes)
+    flow = coarse_to_fine_pyramids(pyr0, pyr1, solve_warp, params, init_flow, callback, stats)
+    if stats is not None:
+        stats["seconds"] = time.perf_counter() - t_start
+    return flow
+
+
+def coarse_to_fine_pyramids(
+    pyr0: list[np.ndarray],
+    pyr1: list[np.ndarray],
+    solve_warp: WarpSolver,
+    params: CoarseToFineParams,
+    init_flow: np.ndarray | None = None,
+    callback: ProgressCallback | None = None,
+    stats: dict | None = None,
+    levels: int | None = None,
+) -> np.ndarray:
+    """:func:`coarse_to_fine` on pyramids built by :func:`prepare_pyramid`.
+
+    Parameters
+    ----------
+    pyr0, pyr1 : list of ndarray, each (h, w, C) float32
+        Pre-processed pyramids of the two frames, finest first, of equal shapes.
+    solve_warp, params, init_flow, callback, stats, levels
+        As in :func:`coarse_to_fine` (``levels`` takes the finest levels of the
+        given pyramids).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+    """
+    t_start = time.perf_counter()
+    n_levels = min(len(pyr0), len(pyr1))
+    if levels is not None:
+        _check(levels >= 1, "levels", f"must be >= 1, got {levels}")
+        n_levels = min(n_levels, levels)
+    shapes = [p.shape[:2] for p in pyr0[:n_levels]]
     total = sum(params.level_warps(shp) for shp in shapes)
     done = 0
     if init_flow is not None:
         flow = resize_flow(np.asarray(init_flow, np.float32), shapes[-1])
     else:
         flow = np.zeros(shapes[-1] + (2,), np.float32)
-    n_ch = I0.shape[2]
+    n_ch = pyr0[0].shape[2]
     stats = {} if stats is None else stats
     state: dict = {}
     for level in range(n_levels - 1, -1, -1):

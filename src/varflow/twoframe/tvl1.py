@@ -516,7 +516,8 @@ def solve_warp(
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
 
 
-def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callback=None):
+def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callback=None,
+         levels: int | None = None):
     """TV-L1 optical flow from ``frame0`` to ``frame1``.
 
     Parameters
@@ -528,6 +529,8 @@ def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callb
     init_flow : ndarray, shape (H, W, 2), optional
     callback : callable, optional
         ``callback(done, total)`` after every warp.
+    levels : int, optional
+        Run only the finest ``levels`` pyramid levels (to refine ``init_flow``).
 
     Returns
     -------
@@ -542,5 +545,6 @@ def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callb
     estimation and their principles", CVPR 2010.
     """
     return coarse_to_fine(
-        frame0, frame1, solve_warp, params or TVL1Params(), init_flow=init_flow, callback=callback
+        frame0, frame1, solve_warp, params or TVL1Params(), init_flow=init_flow, callback=callback,
+        levels=levels,
     )
