@@ -72,6 +72,8 @@ __all__ = [
     "l1_regression",
     "l1_regression_numpy",
     "estimate_basis",
+    "sample_columns",
+    "noise_rank",
     "lowrank_step",
     "DEFAULT_SAMPLES_PER_ROW",
     "DEFAULT_RANK_TOL",
@@ -325,6 +327,19 @@ def _l1_checks(U, basis, tol, rho, max_iter):
             _check_int(max_iter, "max_iter"))
 
 
+def _check_weights(weights: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
+    """Validate entry weights: ``None`` or a finite, non-negative ``shape`` array (float32)."""
+    if weights is None:
+        return None
+    w = np.asarray(weights)
+    if w.shape != shape:
+        raise ValueError(f"weights: expected shape {shape}, got {w.shape}")
+    w = np.ascontiguousarray(w, dtype=np.float32)
+    if not np.all(np.isfinite(w)) or (w < 0).any():
+        raise ValueError("weights: must be finite and non-negative")
+    return w
+
+
 def _l1_info(iters: np.ndarray, max_iter: int, unconverged: int) -> dict[str, Any]:
     if unconverged:
         logger.warning("l1_regression: %d columns did not converge in %d iterations",
@@ -341,6 +356,7 @@ def l1_regression_numpy(
     U: np.ndarray,
     basis: np.ndarray,
     *,
+    weights: np.ndarray | None = None,
     tol: float = 1e-7,
     rho: float = 1.5,
     max_iter: int = 200,
@@ -352,6 +368,7 @@ def l1_regression_numpy(
     when its own stopping rule holds (it is then removed from the active set).
     """
     arr, q, tol, rho, max_iter = _l1_checks(U, basis, tol, rho, max_iter)
+    wts = _check_weights(weights, arr.shape)
     m, n = arr.shape
     qt = np.ascontiguousarray(q.T)
     out = np.zeros((m, n), _out_dtype(arr))
@@ -360,6 +377,7 @@ def l1_regression_numpy(
     nrm = np.sqrt((u_all * u_all).sum(0))
     idx = np.flatnonzero(nrm > 0.0)
     ua = u_all[:, idx]
+    wa = np.ones_like(ua) if wts is None else wts[:, idx].astype(np.float64)
     tol2 = (tol * nrm[idx]) ** 2
     mu = 1.25 / nrm[idx]
     mu_max = mu * _MU_RANGE
@@ -374,7 +392,7 @@ def l1_regression_numpy(
         bc = q @ c
         d = ua - bc
         t = d + y * inv
-        e = np.sign(t) * np.maximum(np.abs(t) - inv, 0.0)
+        e = np.sign(t) * np.maximum(np.abs(t) - inv * wa, 0.0)
         z = d - e
         y += mu * z
         res = (z * z).sum(0)
@@ -387,14 +405,15 @@ def l1_regression_numpy(
             out[:, idx[done]] = bc[:, done]
             iters[idx[done]] = k + 1
             keep = ~done
-            idx, ua, e, y = idx[keep], ua[:, keep], e[:, keep], y[:, keep]
+            idx, ua, e, y, wa = idx[keep], ua[:, keep], e[:, keep], y[:, keep], wa[:, keep]
             tol2, mu, mu_max = tol2[keep], mu[keep], mu_max[keep]
     return out, _l1_info(iters, max_iter, unconverged)
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
-def _l1_kernel(U, qt, tol, rho, max_iter, out, iters):
+def _l1_kernel(U, qt, wts, tol, rho, max_iter, out, iters):
     m, n = U.shape
+    weighted = wts.shape[0] == m
     r = qt.shape[0]
     n_blocks = (n + _BLOCK - 1) // _BLOCK
     unconverged = np.zeros(n_blocks, np.int64)
@@ -443,10 +462,11 @@ def _l1_kernel(U, qt, tol, rho, max_iter, out, iters):
                 for i in range(m):
                     d = u[i] - bc[i]
                     t = d + y[i] * inv
-                    if t > inv:
-                        ei = t - inv
-                    elif t < -inv:
-                        ei = t + inv
+                    th = inv * wts[i, j] if weighted else inv
+                    if t > th:
+                        ei = t - th
+                    elif t < -th:
+                        ei = t + th
                     else:
                         ei = 0.0
                     z = d - ei
@@ -468,15 +488,21 @@ def l1_regression(
     U: np.ndarray,
     basis: np.ndarray,
     *,
+    weights: np.ndarray | None = None,
     tol: float = 1e-7,
     rho: float = 1.5,
     max_iter: int = 200,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Robust L1 fit of every column of ``U`` to the span of ``basis`` (l1 filtering).
 
-    For each column ``u_j`` solves ``min_c ||u_j − B c||_1`` and returns
-    ``l_j = B c``.  ``basis`` is first replaced by an orthonormal basis ``Q`` of its
-    span (thin QR), which leaves the fitted columns unchanged.  Each column is the
+    For each column ``u_j`` solves ``min_c Σ_i w_ij |u_ij − (B c)_i|`` (``w = 1``
+    without ``weights``) and returns ``l_j = B c``.  A zero weight leaves the entry
+    out of the fit (e.g. a point hidden in that frame); the soft threshold of the
+    ``e``-step below becomes ``w_ij / μ`` (free entries carry no residual, so a
+    column with many of them converges more slowly and stops a little short:
+    max error ~1e-3 of the values with 60 % free).  ``basis`` is first replaced by an
+    orthonormal basis ``Q`` of its span (thin QR), which leaves the fitted columns
+    unchanged.  Each column is the
     L1 problem ``min ||e||_1  s.t.  u = Q c + e``, solved by the inexact augmented
     Lagrangian method (the scheme of Lin et al. 2010 applied to one column; the
     c-step is exact because ``QᵀQ = I``)::
@@ -505,6 +531,8 @@ def l1_regression(
         Columns to fit; finite.
     basis : ndarray, shape (m, r)
         Basis of the subspace, ``1 <= r <= m``, full column rank.
+    weights : ndarray, shape (m, n), optional
+        Non-negative entry weights ``w``.
     tol : float
         Relative residual of the per-column stopping rule.
     rho : float
@@ -521,13 +549,15 @@ def l1_regression(
         ``iterations_max``, ``unconverged`` (columns that hit ``max_iter``).
     """
     arr, q, tol, rho, max_iter = _l1_checks(U, basis, tol, rho, max_iter)
+    wts = _check_weights(weights, arr.shape)
     # one compiled specialisation per dtype: C-contiguous float32 or float64
     arr = np.ascontiguousarray(arr, dtype=_out_dtype(arr))
     m, n = arr.shape
     out = np.empty((m, n), arr.dtype)
     iters = np.empty(n, np.int64)
     qt = np.ascontiguousarray(q.T)
-    unconverged = int(_l1_kernel(arr, qt, tol, rho, max_iter, out, iters))
+    wk = np.zeros((0, 0), np.float32) if wts is None else wts
+    unconverged = int(_l1_kernel(arr, qt, wk, tol, rho, max_iter, out, iters))
     return out, _l1_info(iters, max_iter, unconverged)
 
 
@@ -565,14 +595,162 @@ def estimate_basis(
     return np.ascontiguousarray(uu[:, :r])
 
 
+def noise_rank(data: np.ndarray) -> tuple[int, float]:
+    """Rank of the signal in a noisy matrix by the optimal hard threshold.
+
+    Gavish & Donoho (2014): for an ``m × n`` matrix (``m <= n`` after transposing)
+    of a low-rank signal plus white noise of unknown level, the singular values
+    of the noise are bounded by ``ω(β) · σ_med``, ``β = m / n``, ``σ_med`` the
+    median singular value and ``ω(β) ≈ 0.56 β³ − 0.95 β² + 1.82 β + 1.43``; the
+    rank is the number of singular values above it.  The threshold is read from
+    the data, so it follows the estimation noise of the footage instead of a
+    fixed share of the largest singular value.
+
+    Parameters
+    ----------
+    data : ndarray, shape (m, n)
+
+    Returns
+    -------
+    rank : int
+        At least 1 unless ``data`` is zero.
+    threshold : float
+        ``ω(β) σ_med``.
+
+    References
+    ----------
+    M. Gavish, D. L. Donoho, "The optimal hard threshold for singular values is
+    4/√3", IEEE Trans. Inf. Theory 60(8), 2014.
+    """
+    arr = _check_matrix(data, "data").astype(np.float64)
+    m, n = sorted(arr.shape)
+    sv = np.linalg.svd(arr, compute_uv=False)
+    if sv.size == 0 or sv[0] == 0.0:
+        return 0, 0.0
+    beta = m / n
+    omega = 0.56 * beta**3 - 0.95 * beta**2 + 1.82 * beta + 1.43
+    thr = float(omega * np.median(sv))
+    return max(int(np.count_nonzero(sv > thr)), 1), thr
+
+
+def _kmeans_labels(x: np.ndarray, k: int, rng: np.random.Generator,
+                   iterations: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """Lloyd's k-means on the rows of ``x`` (k-means++ seeding); returns centres, labels."""
+    n = x.shape[0]
+    k = min(k, n)
+    centres = np.empty((k, x.shape[1]), np.float64)
+    centres[0] = x[rng.integers(n)]
+    d2 = ((x - centres[0]) ** 2).sum(1)
+    for i in range(1, k):
+        total = d2.sum()
+        j = rng.integers(n) if total <= 0 else rng.choice(n, p=d2 / total)
+        centres[i] = x[j]
+        d2 = np.minimum(d2, ((x - centres[i]) ** 2).sum(1))
+    labels = np.zeros(n, np.int64)
+    for _ in range(iterations):
+        labels = _nearest(x, centres)
+        for i in range(k):
+            sel = labels == i
+            if sel.any():
+                centres[i] = x[sel].mean(0)
+    return centres, labels
+
+
+def _nearest(x: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Index of the nearest centre of every row of ``x`` (in chunks: linear memory)."""
+    out = np.empty(x.shape[0], np.int64)
+    cn = (centres * centres).sum(1)
+    for s in range(0, x.shape[0], 65536):
+        xs = x[s:s + 65536]
+        out[s:s + 65536] = np.argmin(cn[None, :] - 2.0 * xs @ centres.T, axis=1)
+    return out
+
+
+def sample_columns(
+    U: np.ndarray,
+    n_samples: int,
+    rng: np.random.Generator,
+    strata: int = 0,
+    reliable: np.ndarray | None = None,
+) -> np.ndarray:
+    """The column sample of the linear-time L-step.
+
+    Parameters
+    ----------
+    U : ndarray, shape (m, n)
+    n_samples : int
+    rng : numpy.random.Generator
+    strata : int
+        0: a uniform sample.  k > 0: stratified by motion: k-means with k clusters
+        on a uniform pilot sample of ``min(n, 4 n_samples)`` columns, every column
+        assigned to its nearest centre (``O(m k n)``), then an equal share of the
+        sample from every cluster (all of a smaller cluster, the rest spread over
+        the others).  A motion layer that covers a few percent of the pixels then
+        has as many seed columns as the dominant one, so the seed PCP keeps its
+        direction instead of taking it for sparse outliers.
+    reliable : ndarray, shape (n,), bool, optional
+        Prefer these columns (e.g. pixels visible in every frame): within a
+        cluster, the others are drawn only when the reliable ones run out.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,), int64
+        Sorted distinct column indices.
+    """
+    n = U.shape[1]
+    n_samples = min(n_samples, n)
+    if strata <= 0 or n_samples >= n:
+        pool = np.arange(n) if reliable is None else np.flatnonzero(reliable)
+        if pool.size >= n_samples:
+            return np.sort(rng.choice(pool, size=n_samples, replace=False))
+        rest = np.setdiff1d(np.arange(n), pool)
+        extra = rng.choice(rest, size=n_samples - pool.size, replace=False)
+        return np.sort(np.concatenate([pool, extra]))
+    x = np.asarray(U, np.float64).T
+    pilot = rng.choice(n, size=min(n, 4 * n_samples), replace=False)
+    centres, _ = _kmeans_labels(x[pilot], strata, rng)
+    labels = _nearest(x, centres)
+    groups = [np.flatnonzero(labels == i) for i in range(centres.shape[0])]
+    groups = [g for g in groups if g.size]
+    quota = np.zeros(len(groups), np.int64)
+    left = n_samples
+    open_ = list(range(len(groups)))
+    while left > 0 and open_:  # equal shares, capped by the cluster sizes
+        share = max(left // len(open_), 1)
+        for i in list(open_):
+            take = min(share, groups[i].size - quota[i], left)
+            quota[i] += take
+            left -= take
+            if quota[i] >= groups[i].size:
+                open_.remove(i)
+            if left == 0:
+                break
+    picks = []
+    for g, q in zip(groups, quota, strict=True):
+        if q == 0:
+            continue
+        if reliable is not None:
+            good, bad = g[reliable[g]], g[~reliable[g]]
+            first = rng.choice(good, size=min(q, good.size), replace=False)
+            picks.append(first)
+            if q > good.size:
+                picks.append(rng.choice(bad, size=q - good.size, replace=False))
+        else:
+            picks.append(rng.choice(g, size=q, replace=False))
+    return np.sort(np.concatenate(picks))
+
+
 def rpca_linear(
     U: np.ndarray,
     lam: float | None = None,
     n_samples: int | None = None,
     seed: int | np.random.Generator | None = 0,
     *,
+    weights: np.ndarray | None = None,
+    strata: int = 0,
     basis: np.ndarray | None = None,
     rank_tol: float = DEFAULT_RANK_TOL,
+    rank_rule: Literal["relative", "noise"] = "relative",
     max_rank: int | None = None,
     tol: float = 1e-7,
     max_iter: int = 500,
@@ -584,9 +762,11 @@ def rpca_linear(
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Principal component pursuit in linear time by l1 filtering (Liu et al. 2016).
 
-    1. *Seed.*  Draw ``s = n_samples`` distinct columns uniformly at random (local
-       :func:`numpy.random.default_rng` from ``seed``).  All ``m = 2F`` rows are kept
-       (``m`` is small), so only columns are sampled.
+    1. *Seed.*  Draw ``s = n_samples`` distinct columns at random (local
+       :func:`numpy.random.default_rng` from ``seed``): uniformly, or stratified by
+       motion clusters (``strata``, :func:`sample_columns`); columns whose entries
+       all have positive ``weights`` first.  All ``m = 2F`` rows are kept (``m`` is
+       small), so only columns are sampled.
     2. *Seed PCP.*  Solve PCP on the ``(m, s)`` sub-matrix with :func:`rpca_exact`,
        with ``λ_s = λ · sqrt(n / s)`` (the weight that keeps the balance of the two
        terms when n columns shrink to s: the nuclear norm of an incoherent matrix
@@ -595,8 +775,8 @@ def rpca_linear(
        ``B`` is the left singular vectors of its low-rank part with
        ``σ_i > rank_tol · σ_1`` (:func:`estimate_basis`).
     3. *l1 filtering.*  Every column of ``U`` (sampled ones included) is replaced by
-       its robust L1 fit ``l_j = B argmin_c ||u_j − B c||_1`` (:func:`l1_regression`).
-       ``S = U − L``.
+       its robust L1 fit ``l_j = B argmin_c Σ_i w_ij |u_ij − (B c)_i|``
+       (:func:`l1_regression`).  ``S = U − L``.
 
     In the exact-recovery regime (``U = L0 + S0`` with PCP recovering ``L0`` both on
     the seed and on the full matrix) the result is ``L0``, the PCP solution.  Outside
@@ -616,11 +796,22 @@ def rpca_linear(
         (:data:`DEFAULT_SAMPLES_PER_ROW` · m, i.e. 1200 for F = 30).  Clipped to n.
     seed : int or Generator, optional
         Seed of the local random generator for the column sample.
+    weights : ndarray, shape (m, n), optional
+        Non-negative entry weights of the l1 filtering (0 = left out, e.g. a point
+        hidden in that frame); columns with all weights positive are sampled first.
+    strata : int
+        Motion clusters of a stratified sample (0 = uniform); see
+        :func:`sample_columns`.
     basis : ndarray, shape (m, r), optional
         Warm start: skip steps 1-2 and filter against this basis (e.g.
         ``info["basis"]`` of the previous RLR iteration).  The rank is then fixed.
     rank_tol : float
         Relative singular-value threshold of the rank estimate (default 1e-4).
+    rank_rule : {"relative", "noise"}
+        "relative": keep ``σ_i > rank_tol · σ_1`` of the seed PCP's low-rank part;
+        "noise": the rank of the seed columns by the optimal hard threshold of
+        :func:`noise_rank` (at most the rank of the seed PCP's low-rank part; at
+        least ``rank_tol`` of σ_1 as well).
     max_rank : int, optional
         Upper bound on the estimated rank.
     tol, max_iter : float, int
@@ -662,6 +853,8 @@ def rpca_linear(
     _check_int(l1_max_iter, "l1_max_iter")
     if not 0.0 < float(rank_tol) < 1.0:
         raise ValueError(f"rank_tol: must lie in (0, 1), got {rank_tol!r}")
+    if rank_rule not in ("relative", "noise"):
+        raise ValueError(f"rank_rule: expected 'relative' or 'noise', got {rank_rule!r}")
     if max_rank is not None:
         _check_int(max_rank, "max_rank")
     if n_samples is None:
@@ -673,13 +866,18 @@ def rpca_linear(
 
     info: dict[str, Any] = {"lam": lam, "warm_start": basis is not None, "columns": None,
                             "seed_info": None, "lam_sample": None}
+    wts = _check_weights(weights, arr.shape)
     if basis is None:
         rng = np.random.default_rng(seed)
-        cols = np.sort(rng.choice(n, size=n_samples, replace=False))
+        reliable = None if wts is None else (wts > 0).all(axis=0)
+        cols = sample_columns(arr, n_samples, rng, strata, reliable)
         lam_s = lam * math.sqrt(n / n_samples)
         l_s, _, seed_info = rpca_exact(arr[:, cols], lam_s, tol=tol, max_iter=max_iter,
                                        rho=rho)
         q = estimate_basis(l_s, rank_tol, max_rank)
+        if rank_rule == "noise":
+            r_noise, _ = noise_rank(arr[:, cols])
+            q = q[:, :r_noise]
         info.update(columns=cols, seed_info=seed_info, lam_sample=lam_s, n_samples=n_samples)
         logger.debug("rpca_linear: seed PCP on %d columns, %d iterations, rank %d",
                      n_samples, seed_info["iterations"], q.shape[1])
@@ -693,7 +891,7 @@ def rpca_linear(
         info.update(l1_iterations_mean=0.0, l1_iterations_max=0, l1_unconverged=0)
     else:
         solver = l1_regression if engine == "numba" else l1_regression_numpy
-        L, l1 = solver(arr, q, tol=l1_tol, rho=l1_rho, max_iter=l1_max_iter)
+        L, l1 = solver(arr, q, weights=wts, tol=l1_tol, rho=l1_rho, max_iter=l1_max_iter)
         info.update(l1_iterations_mean=l1["iterations_mean"],
                     l1_iterations_max=l1["iterations_max"], l1_unconverged=l1["unconverged"])
     return L, arr - L, info
