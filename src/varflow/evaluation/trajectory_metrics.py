@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["trajectory_errors", "frame11_flow"]
+__all__ = ["trajectory_errors", "frame11_flow", "occlusion_accuracy"]
 
 logger = logging.getLogger(__name__)
 
@@ -226,3 +226,47 @@ def frame11_flow(traj: np.ndarray, ref: int, step: int = 1) -> np.ndarray:
     if not 0 <= target < n_frames:
         raise ValueError(f"step: frame ref + step = {target} is outside [0, {n_frames})")
     return np.array(t[target], dtype=np.float32, copy=True)
+
+
+def occlusion_accuracy(estimated: np.ndarray, truth: np.ndarray, ref: int | None = None
+                       ) -> dict[str, float]:
+    """TAP-Vid's occlusion accuracy and the share of hidden points detected.
+
+    Doersch et al., "TAP-Vid: a benchmark for tracking any point in a video",
+    NeurIPS 2022: the fraction of (point, frame) pairs whose visible / hidden
+    label is right.
+
+    Parameters
+    ----------
+    estimated, truth : ndarray, shape (F, H, W), bool
+        Visibility (True = visible).
+    ref : int, optional
+        Reference frame, left out (visible by definition in both).
+
+    Returns
+    -------
+    dict
+        ``accuracy``: fraction of (frame, pixel) pairs whose label is right;
+        ``hidden_recall``: fraction of the truly hidden pairs labelled hidden
+        (NaN if none); ``hidden_precision``: fraction of the pairs labelled hidden
+        that are (NaN if none); ``hidden_true``, ``hidden_estimated``: shares.
+    """
+    e = np.asarray(estimated, bool)
+    t = np.asarray(truth, bool)
+    if e.shape != t.shape or e.ndim != 3:
+        raise ValueError(f"estimated: expected the shape of truth (F, H, W), got {e.shape} "
+                         f"and {t.shape}")
+    keep = np.ones(e.shape[0], bool)
+    if ref is not None:
+        keep[ref] = False
+    e, t = e[keep], t[keep]
+    hid_t, hid_e = ~t, ~e
+    n_t, n_e = int(hid_t.sum()), int(hid_e.sum())
+    both = int((hid_t & hid_e).sum())
+    return {
+        "accuracy": float((e == t).mean()) if e.size else float("nan"),
+        "hidden_recall": both / n_t if n_t else float("nan"),
+        "hidden_precision": both / n_e if n_e else float("nan"),
+        "hidden_true": float(hid_t.mean()) if e.size else float("nan"),
+        "hidden_estimated": float(hid_e.mean()) if e.size else float("nan"),
+    }

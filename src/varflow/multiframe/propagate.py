@@ -1,0 +1,172 @@
+"""Initial trajectories that survive cumulative motion: outward propagation with fusion.
+
+Independent two-frame flows from the reference ``r`` to every frame (the
+``twoframe`` tracker) fail once the displacement grows beyond what the pyramid can
+follow — a thin or small structure that moves farther than its own size vanishes
+at the coarse levels.  Here the frames are visited outward from the reference,
+``r ± 1, r ± 2, …``, and every frame ``n`` gets two candidates:
+
+* **propagated** ``P_n``: the neighbour's trajectory extrapolated at constant
+  velocity, ``T_{n−s} + (T_{n−s} − T_{n−2s})`` (``s = ±1`` the direction,
+  ``T_r = 0``), refined against the reference frame directly by the two-frame
+  solver on the finest ``propagate_levels`` pyramid levels only, so that it
+  corrects the extrapolation (the acceleration and the neighbour's errors)
+  without having to find the whole displacement again;
+* **direct** ``D_n``: the two-frame flow from the reference to frame ``n`` over
+  the whole pyramid, from zero motion (what ``twoframe`` computes).
+
+Where they disagree the pixel keeps the candidate with the smaller edge-aware
+photometric cost (:func:`varflow.ops.fusion.fuse`: the colour constancy residual
+aggregated with adaptive support weights of the reference frame); the propagated
+candidate wins ties.  For ``n = r ± 1`` there is nothing to propagate and only the
+direct flow is computed.  Last, :func:`varflow.ops.fusion.repair` lets every pixel
+take the vector of a pixel a few pixels away where that fits the frames better:
+the coarse-to-fine smoothing leaves a band of the wrong motion along object
+edges, and a propagated band would grow by a pixel or so per frame.
+
+Every frame is pre-processed and its pyramid built once
+(:func:`frame_pyramids`); the pyramids are shared by every pair and by the
+multi-frame refinement that follows.
+
+References
+----------
+N. Sundaram, T. Brox, K. Keutzer, "Dense point trajectories by GPU-accelerated
+large displacement optical flow", ECCV 2010 (trajectories by propagating flows).
+
+J. Gibson, O. Marques, "Optical Flow and Trajectory Estimation Methods",
+SpringerBriefs in Computer Science, Springer 2016, ch. 4.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from ..ops.fusion import fuse, repair, repair_margin, support_weights
+from ..ops.pyramid import pyramid_shapes
+from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids, prepare_pyramid
+from ..twoframe.tvl1 import TVL1Params, solve_warp
+from .track import TrackCallback
+
+__all__ = [
+    "frame_pyramids",
+    "extrapolate",
+    "propagate_trajectories",
+]
+
+log = logging.getLogger(__name__)
+
+def frame_pyramids(frames: np.ndarray, params: TVL1Params) -> list[list[np.ndarray]]:
+    """Pre-processed pyramids of every frame, on one set of level shapes.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W, C), float32 in [0, 1]
+    params : TVL1Params
+        Pre-processing and pyramid fields.
+
+    Returns
+    -------
+    list of F lists of ndarray
+        ``pyrs[n][level]``, shape ``(h_l, w_l, C)`` float32, finest first.
+    """
+    shapes = pyramid_shapes(frames.shape[1:3], params.max_levels, params.scale_factor,
+                            params.min_size)
+    return [prepare_pyramid(f, params, shapes) for f in frames]
+
+
+def extrapolate(prev: np.ndarray, prev2: np.ndarray | None) -> np.ndarray:
+    """Constant-velocity guess ``prev + (prev − prev2)`` (``prev2 = None``: zero)."""
+    if prev2 is None:
+        return (2.0 * prev).astype(np.float32)
+    return (2.0 * prev - prev2).astype(np.float32)
+
+
+def propagate_trajectories(
+    frames: np.ndarray,
+    ref: int,
+    params: TVL1Params,
+    pyramids: list[list[np.ndarray]] | None = None,
+    *,
+    levels: int = 3,
+    direct: bool = False,
+    repair_distances: tuple[int, ...] = (2, 4, 8),
+    support_radius: int = 2,
+    support_gamma: float = 0.1,
+    callback: TrackCallback | None = None,
+    stats: dict | None = None,
+) -> np.ndarray:
+    """Initial trajectories by outward propagation, repair and fusion (see the module notes).
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W, C), float32
+        From :func:`varflow.multiframe.track.check_frames`.
+    ref : int
+    params : TVL1Params
+        Of the two-frame solver (TV-L1).
+    pyramids : list, optional
+        :func:`frame_pyramids` of ``frames`` (built here when omitted).
+    levels : int
+        Pyramid levels of the refinement of a propagated candidate.
+    direct : bool
+        Also compute the direct candidate of every frame beyond ``r ± 1`` and fuse;
+        False keeps the propagated candidates alone.
+    repair_distances : tuple of int
+        Offsets of :func:`varflow.ops.fusion.repair`; empty = no repair.
+    support_radius, support_gamma : int, float
+        Window radius R and colour scale γ of the photometric cost
+        (:func:`varflow.ops.fusion.support_weights` of the reference frame).
+    callback : callable, optional
+        ``callback(done, total)`` after each frame.
+    stats : dict, optional
+        Filled with ``seconds``, ``flows`` (two-frame problems solved),
+        ``direct_share`` (share of the pixels of the frames beyond ``r ± 1`` that
+        kept the direct candidate) and ``repaired`` (mean share of the pixels the
+        repair changed).
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+    """
+    t0 = time.perf_counter()
+    n_frames, height, width = frames.shape[:3]
+    pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
+    weights = support_weights(frames[ref], support_radius, support_gamma)
+    traj = np.zeros((n_frames, height, width, 2), np.float32)
+    todo = [n for n in range(ref + 1, n_frames)] + [n for n in range(ref - 1, -1, -1)]
+    n_flows = 0
+    kept_direct: list[float] = []
+    repaired: list[float] = []
+    for i, n in enumerate(todo):
+        s = 1 if n > ref else -1
+        cands = []
+        if abs(n - ref) > 1:
+            prev2 = None if abs(n - ref) == 2 else traj[n - 2 * s]
+            guess = extrapolate(traj[n - s], prev2)
+            cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params,
+                                                 init_flow=guess, levels=levels))
+        if direct or not cands:
+            cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params))
+        n_flows += len(cands)
+        if len(cands) > 1:
+            flow, choice = fuse(frames[ref], frames[n], cands, weights)
+            kept_direct.append(float(choice.mean()))
+        else:
+            flow = cands[0]
+        if repair_distances:
+            rs: dict = {}
+            flow = repair(frames[ref], frames[n], flow, weights, repair_distances, stats=rs,
+                          margin=repair_margin(frames[ref], frames[n]))
+            repaired.append(rs["changed"])
+        traj[n] = flow
+        if callback is not None:
+            callback(i + 1, len(todo))
+    if stats is not None:
+        stats.update(seconds=time.perf_counter() - t0, flows=n_flows,
+                     direct_share=float(np.mean(kept_direct)) if kept_direct else 0.0,
+                     repaired=float(np.mean(repaired)) if repaired else 0.0)
+    log.debug("propagation: %d flows in %.2fs", n_flows, time.perf_counter() - t0)
+    return traj
