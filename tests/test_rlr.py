@@ -178,7 +178,10 @@ def small_seq():
 def test_link_weight_zero_gives_independent_two_frame_problems(small_seq):
     s = small_seq
     frames = check_frames(s.frames)
-    params = RLRParams(link_weight=0.0, n_warps=2, max_iterations=20)
+    # with independent initial flows and no visibility mask (the default propagation
+    # initialises a frame from its neighbours)
+    params = RLRParams(link_weight=0.0, n_warps=2, max_iterations=20, init="twoframe",
+                       visibility=False)
     joint = track_rlr(frames, s.ref, params)
     assert np.all(joint[s.ref] == 0)
     for n in (0, 2, 6):
@@ -202,10 +205,11 @@ def test_exact_and_linear_lowrank_steps_find_the_same_rank(small_seq):
     # Both L-steps recover the rank-3 motion subspace of the affine scene at every
     # step.  Full PCP shrinks the singular values inside that subspace (the
     # nuclear-norm bias) while l1 filtering projects onto it, so the linear solver
-    # is the more accurate one (measured 2026-11-23: EPE 0.071 vs 0.128).
+    # is the more accurate one (measured 2026-11-23: EPE 0.071 vs 0.128).  The
+    # threshold 0.03 (the default 0.003 keeps a fourth, noise direction here).
     s = small_seq
     frames = check_frames(s.frames)
-    params = RLRParams(n_warps=2, max_iterations=20)
+    params = RLRParams(n_warps=2, max_iterations=20, rank_tol=0.03)
     st_lin, st_ex = {}, {}
     lin = track_rlr(frames, s.ref, params, stats=st_lin)
     ex = track_rlr(frames, s.ref, params.replace(lowrank_method="exact"), stats=st_ex)
@@ -219,7 +223,9 @@ def test_exact_and_linear_lowrank_steps_find_the_same_rank(small_seq):
     "field, value",
     [("link_weight", -1.0), ("pcp_scale", 0.0), ("primal_step", 0.0), ("alternations", 0),
      ("lowrank_method", "svd"), ("data_prox", "x"), ("init", "chain"), ("tv_weight", 0.0),
-     ("rank_tol", 1.0), ("refine_levels", -1), ("ustep_tolerance", -0.1)],
+     ("rank_tol", 1.0), ("refine_levels", -1), ("ustep_tolerance", -0.1),
+     ("hidden_link_weight", -1.0), ("hidden_data_weight", 1.5), ("rank_rule", "svd"),
+     ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):

@@ -78,8 +78,9 @@ def track(
     *,
     params: Any = None,
     callback: ProgressCallback | None = None,
+    return_visibility: bool = False,
     **overrides: Any,
-) -> np.ndarray:
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Dense trajectories of the reference frame's pixels through a sequence.
 
     Parameters
@@ -95,14 +96,23 @@ def track(
         A parameter object of the method.
     callback : callable, optional
         ``callback(done, total)`` as the work proceeds.
+    return_visibility : bool
+        Also return the visibility of every reference pixel in every frame
+        (:mod:`varflow.multiframe.visibility`: image bounds, forward-backward
+        consistency and photometric residual).  ``rlr`` and ``mfsf`` estimate it
+        anyway (``visibility=True``, the default); for the other methods it costs
+        one backward flow per frame.
     **overrides
         Parameter fields to change.
 
     Returns
     -------
-    ndarray, shape (F, H, W, 2), float32
+    traj : ndarray, shape (F, H, W, 2), float32
         ``traj[n, y, x]`` = displacement (u, v) of reference pixel ``(x, y)`` in frame
         ``n``; ``traj[ref] == 0``.
+    visible : ndarray, shape (F, H, W), bool
+        Only with ``return_visibility``: is the point of reference pixel ``(x, y)``
+        seen in frame ``n``?  All True in the reference frame.
 
     Raises
     ------
@@ -115,7 +125,17 @@ def track(
     p = make_track_params(m, params, **overrides)
     arr = check_frames(frames)
     r = default_ref(arr.shape[0], ref)
-    return m.track(arr, r, p, callback)
+    stats: dict = {}
+    traj = m.track(arr, r, p, callback, stats=stats)
+    if not return_visibility:
+        return traj
+    visible = stats.get("visible")
+    if visible is None:
+        from .multiframe.propagate import frame_pyramids
+        from .multiframe.visibility import estimate_visibility
+
+        visible = estimate_visibility(traj, r, frame_pyramids(arr, p), p)
+    return traj, visible
 
 
 def flow(

@@ -103,8 +103,10 @@ class Tracker:
     params : type
         Frozen dataclass of its parameters.
     track : callable
-        ``track(frames, ref, params, callback) -> (F, H, W, 2)`` with ``frames`` as
-        returned by :func:`varflow.multiframe.track.check_frames`.
+        ``track(frames, ref, params, callback, stats=None) -> (F, H, W, 2)`` with
+        ``frames`` as returned by :func:`varflow.multiframe.track.check_frames`;
+        ``stats`` (a dict) may gain ``visible``, the ``(F, H, W)`` bool visibility
+        when the method estimates it.
     description : str
     """
 

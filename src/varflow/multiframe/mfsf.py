@@ -131,7 +131,7 @@ def track_mfsf(frames: np.ndarray, ref: int, params: MFSFParams,
     keep[2 * ref: 2 * ref + 2] = False
     cache: dict = {}
 
-    def project(traj: np.ndarray) -> np.ndarray:
+    def project(traj: np.ndarray, visible: np.ndarray | None) -> np.ndarray:
         if "pinv" not in cache:
             if params.basis == "dct":
                 p = dct_basis(n_frames, params.n_basis)

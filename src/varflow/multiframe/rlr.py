@@ -46,12 +46,31 @@ It is minimised by alternation, after every warp of every pyramid level:
    by ``|n − ref|``, ``velocity_rows``) so that far frames do not dominate it.
 
 The reference row of ``U`` is zero by definition and kept fixed.  With ``τ = 0``
-the U-step is ``F − 1`` independent two-frame TV-L1 problems.  The trajectories
-are initialised by the two-frame engine (``init="twoframe"``: TV-L1 from the
-reference to every frame, as the ``twoframe`` tracker) or with zero motion, and
-then refined over the finest ``refine_levels`` levels of the multi-frame pyramid
-(all levels from zero motion).  Each alternation runs the L-step on the current
-``U`` first, then the U-step linked to that ``L``.
+the U-step is ``F − 1`` independent two-frame TV-L1 problems.
+
+Beyond the book (``init``, ``visibility``, ``final_repair``):
+
+* **Initial trajectories** (``init="propagate"``, default) are propagated outward
+  from the reference: frame ``n`` starts from the constant-velocity extrapolation
+  of frames ``n ∓ 1, n ∓ 2`` and is refined against the reference on the finest
+  ``propagate_levels`` levels, then repaired across motion edges
+  (:mod:`varflow.multiframe.propagate`).  Independent two-frame flows
+  (``init="twoframe"``) lose far frames once the displacement outgrows the
+  pyramid; zero motion is the book's start.  The refinement then runs over the
+  finest ``refine_levels`` levels (all levels from zero motion).
+* **Visibility** (:mod:`varflow.multiframe.visibility`): image bounds,
+  forward-backward consistency with backward flows and the photometric residual
+  mark the entries of ``U`` that are hidden.  They get no data term
+  (``hidden_data_weight``), the link weight ``hidden_link_weight`` and weight 0 in
+  the L-step's l1 fit, so they neither pull on the low-rank basis nor keep the
+  spurious match of an occluder.
+* **L-step sample**: the columns of the l1 filtering's seed are sampled per motion
+  cluster (``lowrank_strata``) so that a small moving object has basis vectors.
+* **Final repair**: every frame's field is repaired across motion edges
+  (:func:`varflow.ops.fusion.repair`, margin scaled by the frames' noise).
+
+Each alternation runs the L-step on the current ``U`` first, then the U-step
+linked to that ``L``.
 
 References
 ----------
@@ -81,11 +100,12 @@ import numba as nb
 import numpy as np
 
 from ..ops.differences import divergence, gradient, image_derivatives
+from ..ops.fusion import repair, repair_margin, support_weights
 from ..ops.median import median_filter_flow
 from ..ops.prox import project_l2_ball, prox_linear_l1, prox_linear_l1_exact
-from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_bilinear, resize_flow
+from ..ops.pyramid import resize_bilinear, resize_flow
 from ..ops.warp import warp_bicubic
-from ..twoframe.coarse_to_fine import _check, preprocess
+from ..twoframe.coarse_to_fine import _check, coarse_to_fine_pyramids
 from ..twoframe.tvl1 import (
     _F0,
     _F1,
@@ -98,13 +118,17 @@ from ..twoframe.tvl1 import (
     edge_weight,
     linearise,
 )
+from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
-from .track import TrackCallback, track_twoframe
+from .propagate import frame_pyramids, propagate_trajectories
+from .track import TrackCallback
+from .visibility import VisibilityParams, backward_flows, visibility_from
 
 __all__ = [
     "MultiFrameParams",
     "RLRParams",
     "Coupling",
+    "initial_trajectories",
     "refine_trajectories",
     "track_rlr",
     "ustep_iterations",
@@ -147,29 +171,69 @@ class MultiFrameParams(TVL1Params):
         (``data_sweeps`` sweeps per iteration, warm started), or "auto" = exact for
         grey frames, coordinate descent for colour (the same errors, the U-step
         about 5x faster for colour).
-    init : {"twoframe", "zero"}
-        Initial trajectories: TV-L1 from the reference to every frame, or zero.
-        Default "twoframe".
+    init : {"propagate", "twoframe", "zero"}
+        Initial trajectories: propagated outward from the reference and refined
+        against it frame by frame
+        (:func:`~varflow.multiframe.propagate.propagate_trajectories`), TV-L1 from
+        the reference to every frame independently, or zero.  Default "propagate".
     refine_levels : int
-        With ``init="twoframe"``, the multi-frame refinement runs on this many of
-        the finest pyramid levels, starting from the initial trajectories resized to
-        the coarsest of them; 0 = every level.  Restarting the refinement from the
-        coarsest level would throw the initialisation's detail away.  Default 3.
+        With an initialisation other than "zero", the multi-frame refinement runs
+        on this many of the finest pyramid levels, starting from the initial
+        trajectories resized to the coarsest of them; 0 = every level.  Restarting
+        the refinement from the coarsest level would throw the initialisation's
+        detail away.  Default 3.
     ustep_tolerance : float
         Stop a U-step early when the RMS change of a frame's displacement per
         primal-dual iteration is below this many pixels; 0 runs
         ``max_iterations`` iterations.  The primal-dual steps are small, so the
         TV-L1 ``tolerance`` (which serves the initialisation) would stop it after a
         few iterations.  Default 0.
+    propagate_levels : int
+        With ``init="propagate"``: pyramid levels of the refinement of a frame's
+        trajectory extrapolated from its neighbours
+        (:func:`varflow.multiframe.propagate.propagate_trajectories`).  Default 3.
+    propagate_direct : bool
+        With ``init="propagate"``: also compute each far frame's direct two-frame
+        flow from the reference and keep, per pixel, the candidate that fits the
+        frames better.  Default False.
+    visibility : bool
+        Estimate which reference points are hidden in which frame from the
+        initial trajectories (:mod:`varflow.multiframe.visibility`) and switch the
+        data term off there: a hidden point has nothing to match, so the
+        regulariser and the coupling decide it.  Default True.
+    fb_tolerance : float
+        Largest forward-backward error of a visible point, pixels.  Default 1.5.
+    photo_factor : float
+        A visible point's photometric cost is at most this many times the frame's
+        median cost.  Default 4.
+    final_repair : bool
+        After the refinement, let every pixel of every frame take the vector of a
+        pixel a few pixels away where that fits the frames better
+        (:func:`varflow.ops.fusion.repair`), as the propagation does: the TV of
+        the refinement lets a band of one surface's motion bleed over object
+        edges.  Default True.
+    hidden_data_weight : float
+        Factor of the data term of the entries marked hidden, in [0, 1]: 0 switches
+        it off, 1 keeps it (the visibility then only steers the coupling: the
+        L-step's weights and ``hidden_link_weight``).  Default 0 (development clips
+        of the tuning split: mean EPE 0.189 against 0.193 with 1; RubberWhale and
+        the noisy synthetic clips the same within 1 %).
     """
 
     tv_weight: float = 1.0
     primal_step: float = 0.25
     alternations: int = 1
     data_prox: str = "auto"
-    init: str = "twoframe"
+    init: str = "propagate"
     refine_levels: int = 3
     ustep_tolerance: float = 0.0
+    propagate_levels: int = 3
+    propagate_direct: bool = False
+    visibility: bool = True
+    fb_tolerance: float = 1.5
+    photo_factor: float = 4.0
+    final_repair: bool = True
+    hidden_data_weight: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -182,14 +246,24 @@ class MultiFrameParams(TVL1Params):
             f"must be 'auto', 'exact' or 'cd', got {self.data_prox!r}",
         )
         _check(
-            self.init in ("twoframe", "zero"),
+            self.init in ("propagate", "twoframe", "zero"),
             "init",
-            f"must be 'twoframe' or 'zero', got {self.init!r}",
+            f"must be 'propagate', 'twoframe' or 'zero', got {self.init!r}",
         )
         _check(self.refine_levels >= 0, "refine_levels",
                f"must be >= 0, got {self.refine_levels}")
         _check(self.ustep_tolerance >= 0, "ustep_tolerance",
                f"must be >= 0, got {self.ustep_tolerance}")
+        _check(self.propagate_levels >= 1, "propagate_levels",
+               f"must be >= 1, got {self.propagate_levels}")
+        _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
+               f"must be in [0, 1], got {self.hidden_data_weight}")
+        self.visibility_params()  # validates fb_tolerance and photo_factor
+
+    def visibility_params(self) -> VisibilityParams:
+        """The :class:`~varflow.multiframe.visibility.VisibilityParams` of these fields."""
+        return VisibilityParams(fb_tolerance=self.fb_tolerance, photo_factor=self.photo_factor,
+                                backward_levels=self.propagate_levels)
 
 
 @dataclass(frozen=True)
@@ -201,9 +275,15 @@ class RLRParams(MultiFrameParams):
     link_weight : float
         τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
         the units of the TV weight).  0 decouples the frames (no L-step).  Default 2
-        (tuned on the synthetic suite of long clips with low-rank motion); short
-        real clips need a far weaker link, about 0.02 (Middlebury RubberWhale, see
-        benchmarks/README.md).
+        (chosen on the tuning split of the photographic clips,
+        :mod:`varflow.generators.photo`).  Known limit: on the 8-frame RubberWhale
+        clip the adjacent frame's AEE is 0.132 at this weight against 0.0994 for
+        the two-frame flow, and 0.0998 at 0.02 (benchmarks/README.md); the noisy
+        synthetic clips need the strong link.
+    hidden_link_weight : float
+        τ_h, the link weight of the entries the visibility estimate marks hidden
+        (they have nothing reliable to match, so the low-rank fit should decide
+        them rather than the TV of their neighbours).  Default 2.
     pcp_scale : float
         κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
         standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
@@ -212,7 +292,15 @@ class RLRParams(MultiFrameParams):
         Relative singular-value threshold of the L-step's basis: directions of the
         seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
         rank is estimated, never given).  Dense estimation noise otherwise enters
-        ``L`` as many tiny singular values.  Default 0.03.
+        ``L`` as many tiny singular values.  Default 0.003 (tuning split of the
+        photographic clips: 0.03 underfits a small moving object, fitted to the
+        exact trajectories it leaves 0.44 px against 0.02 px).
+    rank_rule : {"relative", "noise"}
+        Rank of the L-step's basis: the ``rank_tol`` threshold relative to the
+        largest singular value, or the optimal hard threshold of Gavish & Donoho
+        (2014) for the noise level estimated from the singular values
+        (:func:`varflow.multiframe.lowrank.noise_rank`).  Default "relative"
+        (RubberWhale frame-11 AEE 0.132 against 0.141 with "noise").
     lowrank_method : {"linear", "exact"}
         L-step solver: l1 filtering on a random column sample (linear cost) or full
         PCP (reference; its L is truncated by the same ``rank_tol`` rule).
@@ -231,20 +319,34 @@ class RLRParams(MultiFrameParams):
         do not dominate the fit; constant-velocity motion becomes rank 2.
         Default True (synthetic suite: mean EPE 0.0644 against 0.0674 without;
         RubberWhale frame-11 AEE 0.176 against 0.283).
+    lowrank_strata : int
+        Motion clusters of the L-step's stratified column sample
+        (:func:`varflow.multiframe.lowrank.sample_columns`); 0 = a uniform sample,
+        which can miss a small moving object.  Default 8.
+    level_basis : bool
+        Find the low-rank basis (seed PCP and rank) at the first warp of every
+        pyramid level and keep it for the level's other warps, which then only
+        refit every column to it (l1 filtering).  Default True.
     """
 
     link_weight: float = 2.0
+    hidden_link_weight: float = 2.0
     pcp_scale: float = 1.0
-    rank_tol: float = 0.03
+    rank_tol: float = 0.003
+    rank_rule: str = "relative"
     lowrank_method: str = "linear"
     lowrank_samples: int = 0
     seed: int = 0
     link_edge: bool = False
     velocity_rows: bool = True
+    lowrank_strata: int = 8
+    level_basis: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check(self.link_weight >= 0, "link_weight", f"must be >= 0, got {self.link_weight}")
+        _check(self.hidden_link_weight >= 0, "hidden_link_weight",
+               f"must be >= 0, got {self.hidden_link_weight}")
         _check(self.pcp_scale > 0, "pcp_scale", f"must be > 0, got {self.pcp_scale}")
         _check(0 < self.rank_tol < 1, "rank_tol", f"must be in (0, 1), got {self.rank_tol}")
         _check(
@@ -252,6 +354,10 @@ class RLRParams(MultiFrameParams):
             "lowrank_method",
             f"must be 'linear' or 'exact', got {self.lowrank_method!r}",
         )
+        _check(self.rank_rule in ("relative", "noise"), "rank_rule",
+               f"must be 'relative' or 'noise', got {self.rank_rule!r}")
+        _check(self.lowrank_strata >= 0, "lowrank_strata",
+               f"must be >= 0, got {self.lowrank_strata}")
         _check(
             self.lowrank_samples >= 0,
             "lowrank_samples",
@@ -844,13 +950,16 @@ class Coupling:
     weight : float
         τ or β; 0 decouples the frames.
     target : callable
-        ``target(traj) -> (F, h, w, 2)``: the coupling target ``T`` from the current
-        trajectories at the current level (RLR: the L-step; MFSF: the projection
-        onto the basis), computed before every U-step.
+        ``target(traj, visible) -> (F, h, w, 2)``: the coupling target ``T`` from the
+        current trajectories at the current level (RLR: the L-step; MFSF: the
+        projection onto the basis), computed before every U-step; ``visible`` is
+        the ``(F, h, w)`` bool visibility at that level, or None.
     edge_scaled : bool
         Scale an "l1" weight by the edge weight g(x).
     seconds : float
         Time spent in ``target`` (filled in by the driver).
+    hidden_weight : float, optional
+        An "l1" weight for the entries marked hidden (default: ``weight``).
     """
 
     kind: str
@@ -858,19 +967,66 @@ class Coupling:
     target: Any
     edge_scaled: bool = False
     seconds: float = 0.0
+    hidden_weight: float | None = None
+
+
+def _level_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A boolean ``(H, W)`` mask at a pyramid level: area average, then > 1/2."""
+    if mask.shape == shape:
+        return mask
+    m = resize_bilinear(mask[..., None].astype(np.float32), shape)[..., 0]
+    return m > 0.5
+
+
+def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
+                         pyramids: list[list[np.ndarray]],
+                         callback: TrackCallback | None = None) -> np.ndarray:
+    """The initial trajectories of ``params.init`` (see :class:`MultiFrameParams`).
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W, C), float32
+    ref : int
+    params : MultiFrameParams
+    pyramids : list
+        :func:`varflow.multiframe.propagate.frame_pyramids` of ``frames``.
+    callback : callable, optional
+        ``callback(done, total)`` after each frame.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, 2), float32
+    """
+    if params.init == "propagate":
+        return propagate_trajectories(frames, ref, params, pyramids,
+                                      levels=params.propagate_levels,
+                                      direct=params.propagate_direct, callback=callback)
+    if params.init == "twoframe":
+        traj = np.zeros(frames.shape[:3] + (2,), np.float32)
+        others = [n for n in range(frames.shape[0]) if n != ref]
+        for i, n in enumerate(others):
+            traj[n] = coarse_to_fine_pyramids(pyramids[ref], pyramids[n], tvl1_solve_warp,
+                                              params)
+            if callback is not None:
+                callback(i + 1, len(others))
+        return traj
+    return np.zeros(frames.shape[:3] + (2,), np.float32)
 
 
 def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         coupling: Coupling, callback: TrackCallback | None = None,
-                        engine: str = "numba", stats: dict | None = None) -> np.ndarray:
+                        engine: str = "numba", stats: dict | None = None,
+                        pyramids: list[list[np.ndarray]] | None = None) -> np.ndarray:
     """The multi-frame coarse-to-fine driver shared by RLR and MFSF.
 
-    Initialises (``params.init``), then on the finest ``params.refine_levels``
-    levels (every level from zero motion), for every warp: re-warps every frame
-    around its current displacement, linearises its data term, and alternates
-    ``params.alternations`` times the coupling target ``T = coupling.target(U)``
-    with the per-frame primal-dual U-step coupled to ``T``; a median filter follows
-    each warp.
+    Builds every frame's pyramid once, initialises (``params.init``), estimates the
+    visibility of the initial trajectories (``params.visibility``), then on the
+    finest ``params.refine_levels`` levels (every level from zero motion), for
+    every warp: re-warps every frame around its current displacement, linearises
+    its data term (switched off where the point is hidden or leaves the frame),
+    and alternates ``params.alternations`` times the coupling target
+    ``T = coupling.target(U, visible)`` with the per-frame primal-dual U-step
+    coupled to ``T``; a median filter follows each warp.
 
     Parameters
     ----------
@@ -881,13 +1037,19 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     params : MultiFrameParams
     coupling : Coupling
     callback : callable, optional
-        ``callback(done, total)`` after each flow of the initialisation and each
-        warp of the multi-frame pyramid.
+        ``callback(done, total)`` after each flow of the initialisation, each
+        backward flow of the visibility estimate and each warp of the
+        multi-frame pyramid.
     engine : {"numba", "numpy"}
         U-step kernel.
     stats : dict, optional
-        Filled with ``levels``, ``warps``, ``init_seconds``, ``ustep_seconds``,
-        ``coupling_seconds``, ``seconds``.
+        Filled with ``levels``, ``warps``, ``init_seconds``, ``visibility_seconds``,
+        ``ustep_seconds``, ``coupling_seconds``, ``seconds`` and ``visible``: the
+        ``(F, H, W)`` bool visibility of the result (estimated with the backward
+        flows of the initial trajectories; None with ``params.visibility`` off).
+    pyramids : list, optional
+        :func:`varflow.multiframe.propagate.frame_pyramids` of ``frames`` (built
+        here when omitted).
 
     Returns
     -------
@@ -901,34 +1063,39 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     t_start = time.perf_counter()
     n_frames, height, width, n_ch = frames.shape
     others = [n for n in range(n_frames) if n != ref]
-    shapes = pyramid_shapes((height, width), params.max_levels, params.scale_factor,
-                            params.min_size)
+    pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
+    shapes = [p.shape[:2] for p in pyrs[ref]]
     n_levels = len(shapes)
     n_run = n_levels
-    if params.init == "twoframe" and params.refine_levels > 0:
+    if params.init != "zero" and params.refine_levels > 0:
         n_run = min(params.refine_levels, n_levels)
-    n_init = len(others) if params.init == "twoframe" else 0
-    total = n_init + n_run * params.n_warps
+    n_init = len(others) if params.init != "zero" else 0
+    n_vis = len(others) if params.visibility else 0
+    total = n_init + n_vis + n_run * params.n_warps
     done = 0
 
-    def tick() -> None:
+    def tick(*_: Any) -> None:
         nonlocal done
         done += 1
         if callback is not None:
             callback(done, total)
 
-    if params.init == "twoframe":
-        init = track_twoframe(frames, ref, params, callback=lambda d, t: tick())
-    else:
-        init = np.zeros((n_frames, height, width, 2), np.float32)
+    init = initial_trajectories(frames, ref, params, pyrs, tick)
     stats["init_seconds"] = time.perf_counter() - t_start
+    visible = None
+    back = None
+    if params.visibility:
+        t0 = time.perf_counter()
+        vparams = params.visibility_params()
+        back = backward_flows(init, ref, pyrs, params, vparams.backward_levels, tick)
+        visible = visibility_from(init, back, ref, [p[0] for p in pyrs], vparams)
+        stats["visibility_seconds"] = time.perf_counter() - t0
 
-    pyrs = [build_pyramid(preprocess(frames[n], params), shapes[:n_run], params.scale_factor,
-                          params.pyramid_sigma) for n in range(n_frames)]
     lam = np.float32(params.data_weight)
     s = np.float32(params.primal_step)
     weight = float(coupling.weight)
-    l1 = coupling.kind == "l1" and weight > 0
+    w_hidden = weight if coupling.hidden_weight is None else float(coupling.hidden_weight)
+    l1 = coupling.kind == "l1" and (weight > 0 or (visible is not None and w_hidden > 0))
     beta = np.float32(weight if coupling.kind == "l2" else 0.0)
     ratio = weight / float(params.data_weight)
     exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_ch == 1)
@@ -942,6 +1109,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         h, w = shapes[level]
         if traj.shape[1:3] != (h, w):
             traj = np.stack([resize_flow(traj[n], (h, w)) for n in range(n_frames)])
+        vis_l = None if visible is None else np.stack(
+            [_level_mask(visible[n], (h, w)) for n in range(n_frames)])
         i0 = pyrs[ref][level]
         g = edge_weight(i0, params.edge_weight, params.edge_weight_min)
         g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
@@ -958,19 +1127,30 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
             i1 = pyrs[n][level]
             dx, dy = image_derivatives(i1)
             planes[n] = np.concatenate([i1, dx, dy], axis=2)
-        ratio_map = ratio * g / np.float32(params.tv_weight) if coupling.edge_scaled else ratio
+        ratio_map: Any = ratio * g / np.float32(params.tv_weight) if coupling.edge_scaled \
+            else np.float32(ratio)
+        ratios = {n: ratio_map for n in others}
+        if l1 and vis_l is not None and w_hidden != weight:
+            r_hid = np.float32(w_hidden / float(params.data_weight))
+            ratios = {n: np.where(vis_l[n], ratio_map, r_hid).astype(np.float32)
+                      for n in others}
         q_all = np.zeros((n_frames, n_ch + (2 if l1 else 0), h, w), np.float32)
         for _k in range(params.n_warps):
             lins = {}
             for n in others:
                 warped, inside = warp_bicubic(planes[n], traj[n])
+                if vis_l is not None and params.hidden_data_weight == 0:
+                    inside &= vis_l[n]
                 lin = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
                                 warped[..., 2 * n_ch:], inside, traj[n])
+                if vis_l is not None and 0 < params.hidden_data_weight < 1:
+                    fac = np.where(vis_l[n], np.float32(1), np.float32(params.hidden_data_weight))
+                    lin = tuple((c * fac).astype(np.float32) for c in lin)
                 # link channels built once per warp; their targets change per alternation
-                lins[n] = link_channels(*lin, no_link, ratio_map) if l1 else lin
+                lins[n] = link_channels(*lin, no_link, ratios[n]) if l1 else lin
             for _a in range(params.alternations):
                 t0 = time.perf_counter()
-                target = coupling.target(traj) if weight > 0 else None
+                target = coupling.target(traj, vis_l) if (weight > 0 or l1) else None
                 t1 = time.perf_counter()
                 coupling.seconds += t1 - t0
                 for n in others:  # U-step with the target fixed, frame by frame
@@ -978,7 +1158,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         np.moveaxis(target[n], -1, 0))
                     ix, iy, a = lins[n]
                     if l1 and tk is not None:
-                        set_link_targets(a, n_ch, tk, ratio_map)
+                        r_n = ratios[n]
+                        set_link_targets(a, n_ch, tk, r_n)
                     m = tk if (tk is not None and not l1) else no_target
                     u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
                     kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
@@ -990,11 +1171,20 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                 for n in others:
                     traj[n] = median_filter_flow(traj[n], params.median_size)
             tick()
+    traj[ref] = 0.0
+    if params.final_repair:
+        weights = support_weights(frames[ref])
+        for n in others:
+            traj[n] = repair(frames[ref], frames[n], traj[n], weights,
+                             margin=repair_margin(frames[ref], frames[n]))
+    if back is not None:
+        visible = visibility_from(traj, back, ref, [p[0] for p in pyrs],
+                                  params.visibility_params())
     stats.update(levels=n_run, warps=n_run * params.n_warps, ustep_seconds=t_u,
-                 coupling_seconds=coupling.seconds, seconds=time.perf_counter() - t_start)
+                 coupling_seconds=coupling.seconds, seconds=time.perf_counter() - t_start,
+                 visible=visible)
     log.debug("multi-frame refinement: %d levels, U-step %.2fs, coupling %.2fs", n_run, t_u,
               coupling.seconds)
-    traj[ref] = 0.0
     return traj.astype(np.float32, copy=False)
 
 
@@ -1019,26 +1209,38 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
     if params.velocity_rows:
         row_w[:, 0] = np.repeat([1.0 / max(abs(n - ref), 1) for n in range(n_frames)], 2)
 
-    def lstep(traj: np.ndarray) -> np.ndarray:
+    bases: dict = {}  # the basis of a level, found at its first warp
+
+    def lstep(traj: np.ndarray, visible: np.ndarray | None) -> np.ndarray:
         umat = trajectories_to_matrix(traj) * row_w
         kw: dict = {}
+        level = traj.shape[1:3]
         if params.lowrank_method == "linear":
-            kw = {"seed": params.seed, "rank_tol": params.rank_tol}
+            kw = {"seed": params.seed, "rank_tol": params.rank_tol,
+                  "strata": params.lowrank_strata, "rank_rule": params.rank_rule}
             if params.lowrank_samples:
                 kw["n_samples"] = params.lowrank_samples
-        alpha = _pcp_alpha(tau, params.pcp_scale, umat.shape)
-        lm, _, info = lowrank_step(umat, alpha, tau, method=params.lowrank_method, **kw)
+            if visible is not None:
+                kw["weights"] = np.repeat(visible.reshape(n_frames, -1), 2, axis=0)
+            if params.level_basis and level in bases:
+                kw["basis"] = bases[level]
+        # only λ = τ/α matters to the L-step (its energy divided by τ)
+        alpha = _pcp_alpha(1.0, params.pcp_scale, umat.shape)
+        lm, _, info = lowrank_step(umat, alpha, 1.0, method=params.lowrank_method, **kw)
         if params.lowrank_method == "exact":  # the same rank rule as the linear solver
             uu, sv, vt = np.linalg.svd(lm.astype(np.float64), full_matrices=False)
             keep = sv > params.rank_tol * sv[0] if sv.size and sv[0] > 0 else sv > 0
             lm = ((uu[:, keep] * sv[keep]) @ vt[keep]).astype(umat.dtype)
             info["rank"] = int(keep.sum())
         ranks.append(int(info.get("rank", -1)))
+        if "basis" in info and info["rank"] > 0:
+            bases[level] = info["basis"]
         out = matrix_to_trajectories(lm / row_w, traj.shape[1], traj.shape[2])
         out[ref] = 0.0
         return out
 
-    coupling = Coupling("l1", tau, lstep, edge_scaled=params.link_edge)
+    coupling = Coupling("l1", tau, lstep, edge_scaled=params.link_edge,
+                        hidden_weight=float(params.hidden_link_weight))
     traj = refine_trajectories(frames, ref, params, coupling, callback, engine, stats)
     stats.update(lstep_seconds=coupling.seconds, ranks=ranks)
     return traj
