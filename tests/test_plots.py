@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 
 from varflow.viz.colorwheel import flow_to_color
-from varflow.viz.plots import displacement_panels, draw_trajectories
+from varflow.viz.plots import HIDDEN_GREY, displacement_panels, draw_trajectories, grey_out
 
 F, H, W, REF = 5, 32, 48, 2
 
@@ -258,3 +258,33 @@ def test_draw_trajectories_invalid(args, kwargs, name):
 def test_displacement_panels_invalid(traj, ref, kwargs, name):
     with pytest.raises(ValueError, match=name):
         displacement_panels(traj, ref, **kwargs)
+
+
+# ------------------------------------------------------------------------- visibility
+
+
+def test_hidden_segments_are_grey_and_visible_ones_keep_their_colour():
+    traj = translation(5, 0)
+    vis = np.ones((F, H, W), bool)
+    vis[REF + 1:] = False  # hidden after the reference frame
+    img = draw_trajectories(BLANK, traj, REF, step=24, show_points=False, visibility=vis)
+    colour = flow_to_color(np.array([[[1.0, 0.0]]]))[0, 0]
+    assert tuple(img[12, 14]) == HIDDEN_GREY  # x = 12 + 2: on the hidden (later) part
+    assert np.all(img[12, 4] == colour)  # x = 12 - 8: before the reference, visible
+    plain = draw_trajectories(BLANK, traj, REF, step=24, show_points=False)
+    assert not np.any(np.all(plain == np.array(HIDDEN_GREY, np.uint8), axis=-1))
+    with pytest.raises(ValueError, match="visibility"):
+        draw_trajectories(BLANK, traj, REF, visibility=vis[:, :4])
+
+
+def test_grey_out_changes_only_hidden_pixels():
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    vis = rng.random((H, W)) > 0.3
+    out = grey_out(img, vis)
+    np.testing.assert_array_equal(out[vis], img[vis])
+    expect = np.round(0.25 * img[~vis].astype(np.float32) + 96.0).astype(np.uint8)
+    np.testing.assert_array_equal(out[~vis], expect)
+    assert grey_out(img[..., 0], vis).shape == (H, W)
+    with pytest.raises(ValueError, match="visible"):
+        grey_out(img, vis[:5])

@@ -91,9 +91,12 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
                    "--warped", str(tmp_path / "warped"), "--png", str(tmp_path / "png"),
                    "--plot", str(tmp_path / "plot.png"), "--n-warps", "3", "-q"])
     assert rc == 0
-    assert f"{method}: 5 frames 96x72, reference 2" in capsys.readouterr().out
-    traj, ref, _, meta = read_trajectories(out)
+    printed = capsys.readouterr().out
+    assert f"{method}: 5 frames 96x72, reference 2" in printed and "% hidden" in printed
+    traj, ref, vis_est, meta = read_trajectories(out)
     assert ref == 2 and traj.shape == (5, 72, 96, 2) and meta["method"] == method
+    assert vis_est.shape == (5, 72, 96) and vis_est.dtype == bool and vis_est[2].all()
+    assert 0.5 < vis_est.mean() <= 1.0
     assert meta["params"]["n_warps"] == 3
     assert len(list((tmp_path / "warped").glob("*.png"))) == 5
     assert len(list((tmp_path / "png").glob("*.png"))) == 5
@@ -160,3 +163,20 @@ def test_api_and_cli_share_the_default_method():
     track_parser = cli.build_parser()._subparsers._group_actions[0].choices["track"]
     cli_default = next(a.default for a in track_parser._actions if a.dest == "method")
     assert api_default == cli_default == "rlr"
+
+
+@pytest.mark.parametrize("method", ["twoframe", "rlr"])
+def test_track_returns_visibility(affine_seq, method):
+    """``return_visibility`` gives an (F, H, W) bool map, the reference all visible."""
+    s = affine_seq
+    frames, r = s.frames, s.ref
+    traj, vis = varflow.track(frames, r, method, return_visibility=True)
+    assert traj.shape == frames.shape[:3] + (2,) and traj.dtype == np.float32
+    assert vis.shape == frames.shape[:3] and vis.dtype == bool and vis[r].all()
+    # points that leave the frame are hidden: compare with the exact visibility
+    others = np.arange(len(frames)) != r
+    assert s.visibility[others].mean() < 0.97  # the test needs hidden points
+    acc = (vis == s.visibility)[others].mean()
+    assert acc > 0.95, acc
+    plain = varflow.track(frames, r, method)
+    np.testing.assert_array_equal(plain, traj)

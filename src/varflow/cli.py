@@ -455,7 +455,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from varflow.multiframe.track import check_frames, default_ref
     from varflow.ops.warp import warp_bicubic
     from varflow.viz import flow_to_color
-    from varflow.viz.plots import draw_trajectories
+    from varflow.viz.plots import draw_trajectories, grey_out
 
     tracker = get_tracker(args.method)
     params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
@@ -477,15 +477,17 @@ def _cmd_track(args: argparse.Namespace) -> int:
     log.info("%d frames %dx%d, reference %d, method %s", n_f, w, h, ref, tracker.name)
     t0 = time.perf_counter()
     with _Progress(tracker.name, args.quiet, unit="step") as progress:
-        traj = varflow.track(frames, ref, tracker.name, params=params, callback=progress)
+        traj, visible = varflow.track(frames, ref, tracker.name, params=params,
+                                      callback=progress, return_visibility=True)
     seconds = time.perf_counter() - t0
     meta = {"method": tracker.name, "params": dataclasses.asdict(params),
             "frames": [str(f) for f in args.frames], "seconds": seconds}
-    write_trajectories(out, traj, ref=ref, metadata=meta)
+    write_trajectories(out, traj, ref=ref, visibility=visible, metadata=meta)
     if "--warped" in dirs:
         for n in range(n_f):
             warped, _ = warp_bicubic(frames[n], traj[n])
-            write_image(dirs["--warped"] / f"warped_{n:04d}.png", _to_uint8(np.squeeze(warped)))
+            write_image(dirs["--warped"] / f"warped_{n:04d}.png",
+                        grey_out(_to_uint8(np.squeeze(warped)), visible[n]))
     mag = _magnitude(traj.reshape(-1, 1, 2))
     if "--png" in dirs:
         radius = max_radius or float(mag.max() or 1.0)
@@ -493,9 +495,12 @@ def _cmd_track(args: argparse.Namespace) -> int:
             write_image(dirs["--png"] / f"displacement_{n:04d}.png",
                         flow_to_color(traj[n], max_radius=radius))
     if plot is not None:
-        write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step))
+        write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step,
+                                            visibility=visible))
+    others = np.arange(n_f) != ref
+    hidden = float(1.0 - visible[others].mean()) if others.any() else 0.0
     print(f"{tracker.name}: {n_f} frames {w}x{h}, reference {ref}, in {seconds:.2f} s, "
-          f"max |displacement| {mag.max():.3f} px -> {out}")
+          f"max |displacement| {mag.max():.3f} px, {100 * hidden:.1f}% hidden -> {out}")
     for flag, d in dirs.items():
         print(f"  {flag[2:]}: {d}")
     if plot is not None:
@@ -559,26 +564,94 @@ def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench_trajectories import format_trajectory_table, run_trajectories
+    from varflow.evaluation.bench_trajectories import (
+        PHOTO_SPLITS,
+        check_photo_options,
+        format_photo_table,
+        format_trajectory_table,
+        run_photo_trajectories,
+        run_trajectories,
+    )
+    from varflow.generators.photo import FAMILIES
+
+    procedural_options = ("frames", "shape", "scenes", "variants")
+    photo_options = ("splits", "families", "photo_frames", "photo_shape")
+
+    def flag(name: str) -> str:
+        return "--" + name.replace("_", "-")
+
+    def parse_hw(text: str, option: str, example: str) -> tuple[int, int]:
+        try:
+            h, w = (int(v) for v in text.lower().split("x"))
+        except ValueError:
+            raise ValueError(f"{option}: expected HxW, e.g. {example}, got {text!r}") from None
+        return h, w
+
+    given = {name for name in (*procedural_options, *photo_options)
+             if getattr(args, name) is not None}
+    suite = args.suite
+    if suite is None:  # implied by the suite-specific options given, else both
+        proc = any(n in given for n in procedural_options)
+        photo = any(n in given for n in photo_options)
+        suite = "procedural" if proc and not photo else "photo" if photo and not proc else "both"
+    for names, wanted in ((procedural_options, "procedural"), (photo_options, "photo")):
+        for n in names:
+            if n in given and suite not in (wanted, "both"):
+                raise ValueError(f"{flag(n)}: an option of the {wanted} suite, which "
+                                 f"--suite {suite} does not run")
+    run_proc = suite in ("procedural", "both")
+    run_photo = suite in ("photo", "both")
 
     methods = _checked_methods(args.methods, get_tracker, "trajectory method")
-    try:
-        h, w = (int(v) for v in args.shape.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--shape: expected HxW, e.g. 96x128, got {args.shape!r}") from None
-    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    frames = 30 if args.frames is None else args.frames
+    h, w = parse_hw("96x128" if args.shape is None else args.shape, "--shape", "96x128")
     kw = {}
     if args.scenes:
         kw["scenes"] = _split_list(args.scenes)
     if args.variants:
         kw["variants"] = _split_list(args.variants)
+    photo_frames = 31 if args.photo_frames is None else args.photo_frames
+    photo_shape = parse_hw("192x256" if args.photo_shape is None else args.photo_shape,
+                           "--photo-shape", "192x256")
+    splits = list(PHOTO_SPLITS) if args.splits is None else _split_list(args.splits)
+    families = list(FAMILIES) if args.families is None else _split_list(args.families)
+    if run_photo:  # fail before any run
+        try:
+            splits, families, photo_frames, photo_shape = check_photo_options(
+                splits, families, photo_frames, photo_shape)
+        except ValueError as exc:
+            arg, _, rest = str(exc).partition(":")
+            names = {"splits": "--splits", "families": "--families",
+                     "n_frames": "--photo-frames", "shape": "--photo-shape"}
+            raise ValueError(f"{names.get(arg, arg)}:{rest}") from None
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
     overrides = _given_params(args)
-    rows = run_trajectories(methods, n_frames=args.frames, shape=(h, w),
-                            overrides=overrides, progress=not args.quiet, **kw)
-    print(f"synthetic sequences, {args.frames} frames {w}x{h}, reference = centre; EPE / RMS "
-          f"in pixels over visible points of all frames but the reference"
-          f"{_params_note(overrides)}")
-    print(format_trajectory_table(rows))
+    rows: list[dict[str, Any]] = []
+    if run_proc:
+        prows = run_trajectories(methods, n_frames=frames, shape=(h, w),
+                                 overrides=overrides, progress=not args.quiet, **kw)
+        print(f"procedural suite: synthetic sequences, {frames} frames {w}x{h}, reference = "
+              f"centre; EPE / RMS in pixels over visible points of all frames but the "
+              f"reference{_params_note(overrides)}")
+        print(format_trajectory_table(prows))
+        rows += [{"suite": "procedural", **r} for r in prows]
+    if run_photo:
+        qrows = run_photo_trajectories(methods, splits=splits, families=families,
+                                       n_frames=photo_frames, shape=photo_shape,
+                                       overrides=overrides, progress=not args.quiet)
+        if run_proc:
+            print()
+        ph, pw = photo_shape
+        print(f"photo suite: clips of real photographs (varflow.generators.photo), "
+              f"{photo_frames} frames {pw}x{ph}, reference = centre; per family the mean over "
+              f"the split's seeds.  EPE in pixels over visible points of all frames but the "
+              f"reference; far EPE: mean per-frame EPE of the two frames at each end (0, 1, "
+              f"F-2, F-1); occ acc: TAP-Vid occlusion accuracy (share of (pixel, frame) pairs, "
+              f"reference excluded, with the right visible/hidden label); hidden rec: share of "
+              f"the hidden pairs labelled hidden; s: seconds per clip with the visibility "
+              f"estimate, JIT warm-up excluded{_params_note(overrides)}")
+        print(format_photo_table(qrows))
+        rows += [{"suite": "photo", **r} for r in qrows]
     _write_rows(rows, csv_path)
     return 0
 
@@ -743,17 +816,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("frames", nargs="+", metavar="FRAME",
                    help="image files in order, or one directory of images or video file")
     p.add_argument("-o", "--output", required=True, metavar="OUT.npz",
-                   help="trajectories (F, H, W, 2), the reference index and metadata")
+                   help="trajectories (F, H, W, 2), visibility (F, H, W), the reference "
+                   "index and metadata")
     p.add_argument("--ref", type=int, default=None, metavar="K",
                    help="reference frame index (default: the centre frame)")
     p.add_argument("--method", default="rlr", metavar="NAME",
                    help=f"one of: {', '.join(TRACKERS)} (default rlr)")
     p.add_argument("--warped", metavar="DIR", help="write every frame warped back to the "
-                   "reference (warped_NNNN.png)")
+                   "reference (warped_NNNN.png; points hidden in that frame greyed out)")
     p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
                    "frame (displacement_NNNN.png, one colour scale)")
     p.add_argument("--plot", metavar="PLOT.png",
-                   help="draw sampled trajectories over the reference frame")
+                   help="draw sampled trajectories over the reference frame (grey where "
+                   "hidden)")
     p.add_argument("--plot-step", type=int, default=16, metavar="PX",
                    help="grid step of the plotted trajectories (default 16)")
     p.add_argument("--max-radius", type=float, metavar="R",
@@ -787,17 +862,45 @@ def build_parser() -> argparse.ArgumentParser:
     _add_param_flags(b, params)
     b.set_defaults(func=_cmd_bench_middlebury)
 
+    from .generators.photo import FAMILIES as PHOTO_FAMILIES
+
     b = bsub.add_parser("trajectories", parents=[common, bench_common],
-                        help="trajectory methods on the synthetic sequences",
-                        description="Trajectory EPE / RMS per scene and variant (book "
-                        "Table 4.2 layout) on sequences with exact ground truth.")
+                        help="trajectory methods on the procedural and photographic "
+                        "synthetic clips",
+                        description="Trajectory methods on clips with exact ground truth.  "
+                        "The procedural suite: EPE / RMS per scene and variant (book Table "
+                        "4.2 layout).  The photo suite (varflow.generators.photo, real "
+                        "photographs under known motions): per split (tuning seeds 0-2, "
+                        "reporting seeds 100-102) a line per family with EPE, far EPE (the "
+                        "two frames at each end), TAP-Vid occlusion accuracy and hidden "
+                        "recall of the estimated visibility, and seconds.  Without --suite, "
+                        "the options given choose it: only procedural options (--frames, "
+                        "--shape, --scenes, --variants) run the procedural suite, only photo "
+                        "options (--splits, --families, --photo-frames, --photo-shape) the "
+                        "photo suite, otherwise both.  --csv writes the rows of both with a "
+                        "'suite' column (procedural rows: scene, variant, epe, rms, seconds; "
+                        "photo rows: split, family, seed, epe, far_epe, rms, occ_accuracy, "
+                        "hidden_recall, seconds).")
+    b.add_argument("--suite", choices=("procedural", "photo", "both"), default=None,
+                   help="which suite to run (default: both, unless only one suite's options "
+                   "are given)")
     b.add_argument("--methods", default=",".join(TRACKERS), metavar="NAMES",
                    help=f"comma-separated, from: {', '.join(TRACKERS)} (default all)")
-    b.add_argument("--frames", type=int, default=30, metavar="F", help="frames (default 30)")
-    b.add_argument("--shape", default="96x128", metavar="HxW", help="frame size (default 96x128)")
-    b.add_argument("--scenes", metavar="NAMES", help="subset: affine,nonrigid,layers")
-    b.add_argument("--variants", metavar="NAMES",
+    g = b.add_argument_group("procedural suite")
+    g.add_argument("--frames", type=int, default=None, metavar="F", help="frames (default 30)")
+    g.add_argument("--shape", default=None, metavar="HxW", help="frame size (default 96x128)")
+    g.add_argument("--scenes", metavar="NAMES", help="subset: affine,nonrigid,layers")
+    g.add_argument("--variants", metavar="NAMES",
                    help="subset: clean,gaussian,saltpepper,occluder")
+    g = b.add_argument_group("photo suite")
+    g.add_argument("--splits", metavar="NAMES",
+                   help="comma-separated, from: tuning,reporting (default both)")
+    g.add_argument("--families", metavar="NAMES",
+                   help=f"comma-separated subset of: {','.join(PHOTO_FAMILIES)} (default all)")
+    g.add_argument("--photo-frames", type=int, default=None, metavar="F",
+                   help="frames per photo clip (default 31)")
+    g.add_argument("--photo-shape", default=None, metavar="HxW",
+                   help="photo clip size (default 192x256)")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
 

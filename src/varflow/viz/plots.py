@@ -26,7 +26,7 @@ from PIL import Image, ImageDraw, ImageFont
 from .._validate import as_float_image
 from .colorwheel import color_wheel, flow_to_color
 
-__all__ = ["draw_trajectories", "displacement_panels"]
+__all__ = ["draw_trajectories", "displacement_panels", "grey_out", "HIDDEN_GREY"]
 
 logger = logging.getLogger(__name__)
 
@@ -35,6 +35,8 @@ _DIM = 0.5
 #: Positions are clipped to this many pixels (PIL draws with C ints; larger values are
 #: meaningless for a picture).
 _COORD_LIMIT = 1e5
+#: Colour of the hidden parts of a trajectory (:func:`draw_trajectories`).
+HIDDEN_GREY = (150, 150, 150)
 #: Colour of the gaps between panels and of empty cells (never produced by flow_to_color).
 _GAP_COLOUR = (128, 128, 128)
 #: Components beyond this magnitude are unknown (the .flo 1e10 convention).
@@ -148,6 +150,7 @@ def draw_trajectories(
     line_width: int = 1,
     show_points: bool = True,
     max_radius: float | None = None,
+    visibility: np.ndarray | None = None,
 ) -> np.ndarray:
     """Draw sampled trajectories as polylines over the reference frame.
 
@@ -189,6 +192,10 @@ def draw_trajectories(
         (fully saturated hue).  A number: the Middlebury coding with this
         saturation radius, so short tracks are paler and tracks longer than
         ``max_radius`` are darkened.
+    visibility : ndarray, shape (F, H, W), bool, optional
+        Where a point is hidden (False), the segments that reach its position in
+        that frame are drawn in grey (:data:`HIDDEN_GREY`) instead of the track's
+        colour.
 
     Returns
     -------
@@ -238,10 +245,17 @@ def draw_trajectories(
         keep = m[ys, xs]
         ys, xs = ys[keep], xs[keep]
 
+    vis = None
+    if visibility is not None:
+        vis = np.asarray(visibility)
+        if vis.shape != (n_frames, height, width) or vis.dtype != np.bool_:
+            raise ValueError(f"{fn}: visibility must be a boolean array of shape "
+                             f"{(n_frames, height, width)}, got {vis.dtype} {vis.shape}")
     track_uv = uv[:, ys, xs]  # (F, K, 2)
     known = np.isfinite(track_uv).all(axis=2)  # (F, K)
     drawn = known.any(axis=0)
     ys, xs, track_uv, known = ys[drawn], xs[drawn], track_uv[:, drawn], known[:, drawn]
+    seen = None if vis is None else vis[:, ys, xs]  # (F, K)
     n_tracks = ys.size
     logger.debug("%s: %d tracks (step %d) over %d frames", fn, n_tracks, step, n_frames)
 
@@ -264,7 +278,13 @@ def draw_trajectories(
         edges = np.flatnonzero(np.diff(np.concatenate([[False], ok, [False]]).astype(np.int8)))
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             points = [(int(p[0]), int(p[1])) for p in pos[a:b, k]]
-            if len(points) > 1:
+            if len(points) > 1 and seen is not None and not seen[a:b, k].all():
+                # segment by segment: grey where either end is hidden
+                for i in range(len(points) - 1):
+                    ok_seg = seen[a + i, k] and seen[a + i + 1, k]
+                    draw.line(points[i:i + 2], fill=fill if ok_seg else HIDDEN_GREY,
+                              width=line_width)
+            elif len(points) > 1:
                 draw.line(points, fill=fill, width=line_width, joint="curve")
             elif line_width == 1:
                 draw.point(points, fill=fill)
@@ -378,3 +398,27 @@ def displacement_panels(
         y0, x0 = (n // columns) * (height + gap), (n % columns) * (width + gap)
         _label(draw, font, x0, y0, width, height, f"{n} ref" if n == ref else str(n))
     return np.asarray(image, dtype=np.uint8).copy()
+
+
+def grey_out(image: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """Show hidden pixels as a flat mid grey over a faint copy of the image.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3), uint8
+    visible : ndarray, shape (H, W), bool
+
+    Returns
+    -------
+    ndarray, same shape as ``image``, uint8
+        ``image`` where visible; ``0.25 image + 0.75 · 128`` elsewhere.
+    """
+    img = np.asarray(image)
+    vis = np.asarray(visible, bool)
+    if img.shape[:2] != vis.shape:
+        raise ValueError(f"grey_out: visible must have shape {img.shape[:2]}, got {vis.shape}")
+    out = img.copy()
+    hidden = ~vis
+    out[hidden] = (0.25 * img[hidden].astype(np.float32) + 96.0).round().astype(np.uint8)
+    return out
+
