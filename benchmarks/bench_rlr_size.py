@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---:|")
     print(f"| wall time, s | {wall:.1f} |")
     print(f"| wall time per non-reference frame, s | {wall / n_other:.2f} |")
-    keys = ["init_seconds", "ustep_seconds"]
+    keys = ["init_seconds", "visibility_seconds", "ustep_seconds"]
     keys.append("lstep_seconds" if "lstep_seconds" in stats else "coupling_seconds")
     for key in keys:
         if key in stats:
@@ -83,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"| mean trajectory EPE, px | {err['epe']:.4f} |")
     print(f"| sequence generation, s | {t_gen:.1f} |")
     print(f"| result finite | {bool(np.isfinite(traj).all())} |")
+    if stats.get("visible") is not None:
+        from varflow.evaluation.trajectory_metrics import occlusion_accuracy
+
+        occ = occlusion_accuracy(stats["visible"], seq.visibility, seq.ref)
+        print(f"| occlusion accuracy | {occ['accuracy']:.4f} |")
     return 0
 
 
