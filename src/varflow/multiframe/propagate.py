@@ -4,7 +4,7 @@ Independent two-frame flows from the reference ``r`` to every frame (the
 ``twoframe`` tracker) fail once the displacement grows beyond what the pyramid can
 follow — a thin or small structure that moves farther than its own size vanishes
 at the coarse levels.  Here the frames are visited outward from the reference,
-``r ± 1, r ± 2, …``, and every frame ``n`` gets two candidates:
+``r ± 1, r ± 2, …``, and every frame ``n`` gets one or two candidates:
 
 * **propagated** ``P_n``: the neighbour's trajectory extrapolated at constant
   velocity, ``T_{n−s} + (T_{n−s} − T_{n−2s})`` (``s = ±1`` the direction,
@@ -12,8 +12,11 @@ at the coarse levels.  Here the frames are visited outward from the reference,
   solver on the finest ``propagate_levels`` pyramid levels only, so that it
   corrects the extrapolation (the acceleration and the neighbour's errors)
   without having to find the whole displacement again;
-* **direct** ``D_n``: the two-frame flow from the reference to frame ``n`` over
-  the whole pyramid, from zero motion (what ``twoframe`` computes).
+* **direct** ``D_n`` (only with ``direct=True``): the two-frame flow from the
+  reference to frame ``n`` over the whole pyramid, from zero motion (what
+  ``twoframe`` computes).  Off by default: on the tuning split of the
+  photographic clips the fusion let chance matches of the direct flow in on the
+  far frames (mean EPE 1.64 against 0.88 with the propagated candidate alone).
 
 Where they disagree the pixel keeps the candidate with the smaller edge-aware
 photometric cost (:func:`varflow.ops.fusion.fuse`: the colour constancy residual
@@ -57,6 +60,7 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
 
 def frame_pyramids(frames: np.ndarray, params: TVL1Params) -> list[list[np.ndarray]]:
     """Pre-processed pyramids of every frame, on one set of level shapes.
