@@ -1158,8 +1158,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         np.moveaxis(target[n], -1, 0))
                     ix, iy, a = lins[n]
                     if l1 and tk is not None:
-                        r_n = ratios[n]
-                        set_link_targets(a, n_ch, tk, r_n)
+                        set_link_targets(a, n_ch, tk, ratios[n])
                     m = tk if (tk is not None and not l1) else no_target
                     u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
                     kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,

@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..ops.fusion import flow_cost, support_weights
-from ..ops.warp import warp_bicubic
+from ..ops.warp import in_bounds, warp_bicubic
 from ..twoframe.coarse_to_fine import _check, coarse_to_fine_pyramids
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 
@@ -89,15 +89,6 @@ class VisibilityParams:
         _check(self.photo_floor >= 0, "photo_floor", f"must be >= 0, got {self.photo_floor}")
         _check(self.backward_levels >= 1, "backward_levels",
                f"must be >= 1, got {self.backward_levels}")
-
-
-def in_bounds(flow: np.ndarray) -> np.ndarray:
-    """``x + w(x)`` inside ``[0, W−1] × [0, H−1]``: ``(H, W)`` bool."""
-    h, w = flow.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    x = xx + flow[..., 0]
-    y = yy + flow[..., 1]
-    return (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
 
 
 def invert_flow(flow: np.ndarray, iterations: int = 5) -> np.ndarray:

@@ -44,6 +44,8 @@ import math
 import numba as nb
 import numpy as np
 
+from .warp import in_bounds
+
 __all__ = [
     "support_weights",
     "flow_cost",
@@ -286,14 +288,6 @@ def _repair_step_kernel(i0, i1, src, dy, dx, weights, offs, trunc, margin, res, 
                 changed[i, j] = True
 
 
-def _inside_np(flow: np.ndarray) -> np.ndarray:
-    h, w = flow.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    x = xx + flow[..., 0]
-    y = yy + flow[..., 1]
-    return (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
-
-
 def _radius_of(weights: np.ndarray) -> int:
     side = int(round(math.sqrt(weights.shape[0])))
     if side * side != weights.shape[0] or side % 2 == 0:
@@ -496,7 +490,7 @@ def repair(i0: np.ndarray, i1: np.ndarray, flow: np.ndarray, weights: np.ndarray
                 ys = np.clip(np.arange(h) + dy, 0, h - 1)
                 xs = np.clip(np.arange(w) + dx, 0, w - 1)
                 shifted = src[ys][:, xs]
-                better = (c < cost - margin) & _inside_np(best) & _inside_np(shifted)
+                better = (c < cost - margin) & in_bounds(best) & in_bounds(shifted)
                 best[better] = shifted[better]
                 cost = np.where(better, c, cost)
                 changed |= better

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["warp_bicubic", "warp_bicubic_numpy", "keys_weights"]
+__all__ = ["warp_bicubic", "warp_bicubic_numpy", "keys_weights", "in_bounds"]
 
 _A = -0.5
 
@@ -38,6 +38,18 @@ def keys_weights(f: np.ndarray) -> np.ndarray:
         return ((a * t - 5 * a) * t + 8 * a) * t - 4 * a
 
     return np.stack([far(1 + f), near(f), near(1 - f), far(2 - f)], axis=-1)
+
+
+def in_bounds(flow: np.ndarray) -> np.ndarray:
+    """``x + w(x)`` inside ``[0, W−1] × [0, H−1]``: ``(H, W)`` bool.
+
+    The ``inside`` mask of :func:`warp_bicubic` without the sampling.
+    """
+    h, w = flow.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    x = xx + flow[..., 0]
+    y = yy + flow[..., 1]
+    return (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
 
 
 def warp_bicubic_numpy(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
