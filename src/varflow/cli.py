@@ -12,6 +12,11 @@ Synopsis::
                              [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
     varflow bench middlebury-multiframe [--data DIR] [--methods rlr,twoframe,...]
                              [--sintel] [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
+    varflow bench twoframe [--sets photo,middlebury,sintel] [--split tuning|reporting|both]
+                           [--families ...] [--methods tvl1,...]
+                           [--peers deepflow,dis,dualtvl1,skimage|all|none]
+                           [--photo-shape HxW] [--data DIR] [--csv OUT.csv] [--quiet]
+                           [--<parameter> VALUE ...]
     varflow bench sintel-trajectories [--data DIR] [--methods twoframe,mfsf,rlr]
                              [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
                              [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
@@ -656,6 +661,93 @@ def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench_twoframe import (
+        PHOTO_FAMILIES,
+        SETS,
+        check_twoframe_data,
+        check_twoframe_options,
+        format_twoframe_table,
+        resolve_peers,
+        run_twoframe,
+        write_twoframe_csv,
+    )
+    from varflow.evaluation.datasets import data_root
+    from varflow.evaluation.peers import peer_threads
+
+    def option(exc: ValueError) -> ValueError:  # "sets: ..." -> "--sets: ..."
+        arg, _, rest = str(exc).partition(":")
+        names = {"sets": "--sets", "split": "--split", "families": "--families",
+                 "photo_shape": "--photo-shape", "peers": "--peers", "methods": "--methods"}
+        return ValueError(f"{names.get(arg, arg)}:{rest}")
+
+    shape = (256, 320)
+    if args.photo_shape is not None:
+        try:
+            shape = tuple(int(v) for v in args.photo_shape.lower().split("x"))
+            if len(shape) != 2:
+                raise ValueError
+        except ValueError:
+            raise ValueError(f"--photo-shape: expected HxW, e.g. 256x320, got "
+                             f"{args.photo_shape!r}") from None
+    try:
+        sets, _, families, shape = check_twoframe_options(
+            args.sets, args.split or "reporting", args.families or list(PHOTO_FAMILIES), shape)
+        peers, unavailable = resolve_peers(args.peers)
+    except ValueError as exc:
+        raise option(exc) from None
+    if "photo" not in sets:
+        for name in ("split", "families", "photo_shape"):
+            if getattr(args, name) is not None:
+                flag = "--" + name.replace("_", "-")
+                raise ValueError(f"{flag}: only used by the photo set, which --sets "
+                                 f"{','.join(sets)} does not include")
+    methods = _split_list(args.methods)
+    for m in methods:
+        get_method(m)
+    if not methods and not peers:
+        raise ValueError("--methods: give at least one method or an available peer")
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    overrides = _given_params(args)
+    if overrides and not methods:
+        raise ValueError("method parameters given but no --methods to apply them to")
+    missing_sintel = check_twoframe_data(sets, root)  # before any run
+
+    try:
+        import numba
+
+        numba_threads: Any = numba.get_num_threads()
+    except ImportError:  # pragma: no cover - numba is a dependency
+        numba_threads = "?"
+    cv_threads = peer_threads()
+    print(f"Two-frame benchmark ({', '.join(s for s in SETS if s in sets)}): AEE in px over "
+          f"all pixels with ground truth, noc over the non-occluded ones (photo pairs: "
+          f"visible in frame 1; Sintel: its occlusion mask), s: seconds per pair, JIT "
+          f"warm-up excluded; Numba threads {numba_threads}"
+          + (f", OpenCV threads {cv_threads}" if peers and cv_threads is not None else "")
+          + (f"; data {root}" if {"middlebury", "sintel"} & set(sets) else "")
+          + _params_note(overrides))
+    for p, reason in unavailable.items():
+        print(f"peer {p} unavailable: {reason}")
+    for clip, pass_, n in missing_sintel:
+        print(f"Sintel {clip} {pass_} {n}->{n + 1} not found; skipped")
+    rows: list[dict[str, Any]] = []
+    first = True
+    for s in sets:  # one table per set as soon as it is done
+        srows = run_twoframe(methods, peers=peers, sets=[s], split=args.split or "reporting",
+                             families=families, root=root, photo_shape=shape,
+                             overrides=overrides, progress=not args.quiet, warm_up=first)
+        first = False
+        print()
+        print(format_twoframe_table(srows))
+        rows += srows
+    if csv_path is not None:
+        write_twoframe_csv(rows, csv_path)
+        print(f"wrote {csv_path}")
+    return 0
+
+
 def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
     from varflow.evaluation.bench_multiframe import (
         format_multiframe_table,
@@ -903,6 +995,44 @@ def build_parser() -> argparse.ArgumentParser:
                    help="photo clip size (default 192x256)")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
+
+    from .evaluation.bench_twoframe import SETS as SETS_TWOFRAME
+    from .evaluation.peers import PEERS
+    from .generators.photo_pairs import FAMILIES as PAIR_FAMILIES
+
+    b = bsub.add_parser("twoframe", parents=[common, bench_common],
+                        help="two-frame methods and peers on photographic pairs, Middlebury "
+                        "and MPI-Sintel",
+                        description="Two-frame methods (and optional peers: OpenCV DeepFlow, "
+                        "DIS, DualTVL1, scikit-image TV-L1) on three sets: the photographic "
+                        "pairs of varflow.generators.photo_pairs (real photographs under "
+                        "known motions of 3-15 px, exact flow and occlusion mask; tuning "
+                        "seeds 0-2, reporting seeds 100-102), the 8 Middlebury pairs and the "
+                        "MPI-Sintel pairs with ground truth under the data folder (marked "
+                        "small / large motion).  Per pair and method: AEE over all pixels "
+                        "with ground truth, AEE over the non-occluded ones and seconds; a "
+                        "table per set with means, total seconds and ratios to DeepFlow "
+                        "(when it runs, else the first method).  Peers whose library is "
+                        "missing are reported as unavailable and skipped.")
+    b.add_argument("--sets", default=",".join(SETS_TWOFRAME), metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(SETS_TWOFRAME)} (default all)")
+    b.add_argument("--split", choices=("tuning", "reporting", "both"), default=None,
+                   help="seeds of the photo pairs (default reporting)")
+    b.add_argument("--families", metavar="NAMES",
+                   help=f"photo pair families, comma-separated subset of: "
+                   f"{','.join(PAIR_FAMILIES)} (default all)")
+    b.add_argument("--photo-shape", default=None, metavar="HxW",
+                   help="size of the photo pairs (default 256x320)")
+    b.add_argument("--methods", default="tvl1", metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(METHODS)} (default tvl1; "
+                   "empty to run peers only)")
+    b.add_argument("--peers", default="none", metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(PEERS)}; or all, or none "
+                   "(default none)")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    _add_param_flags(b, params)
+    b.set_defaults(func=_cmd_bench_twoframe)
 
     from .evaluation.bench_multiframe import default_methods
 

@@ -10,4 +10,9 @@
   with illumination change or camera noise, with exact trajectories and
   visibility; seeded tuning and reporting splits (the generalisation suite,
   :func:`~varflow.generators.photo.make_photo_clip`).
+* :mod:`varflow.generators.photo_pairs` — two-frame pairs of the same photographs
+  and renderer (camera affine or perspective motion, waves, occluding objects,
+  illumination change, noise, blur; 3-15 px), with exact flow and occlusion mask,
+  on the same tuning and reporting seeds
+  (:func:`~varflow.generators.photo_pairs.make_photo_pair`).
 """
