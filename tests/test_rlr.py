@@ -240,7 +240,8 @@ def test_alternations_relinearise_about_the_warp_start(small_seq):
      ("rank_tol", 1.0), ("refine_levels", -1), ("ustep_tolerance", -0.1),
      ("hidden_link_weight", -1.0), ("hidden_data_weight", 1.5), ("rank_rule", "svd"),
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
-     ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0)],
+     ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
+     ("gradient_weight", 40.0), ("data_normalisation", 0.05)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):

@@ -274,6 +274,10 @@ class MultiFrameParams(TVL1Params):
                f"must be >= 1, got {self.propagate_levels}")
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
+        for name in ("gradient_weight", "data_normalisation"):  # not in the multi-frame U-step yet
+            _check(getattr(self, name) == 0, name,
+                   f"must be 0 here: the multi-frame U-step uses the colour term only, got "
+                   f"{getattr(self, name)}")
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",
