@@ -31,3 +31,21 @@ def linearised_sparse_problem(seed=5, shape=(40, 48), aniso=False):
         tens = np.zeros((3, 1, 1), np.float32)
     ubar = planar(gt + rng.normal(0, 0.05, gt.shape).astype(np.float32))
     return dict(ix=ix, iy=iy, a=a, g=g, tens=tens), ubar, rng, planar(flow0)
+
+
+def to_u8(img):
+    """Float image in [0, 1] -> uint8 (rounded, clipped)."""
+    return np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def wave_texture(shape, shift, seed=0):
+    """A smooth colour texture (sum of plane waves) translated by ``shift`` = (x, y), uint8."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    x, y = x - shift[0], y - shift[1]
+    img = np.full(tuple(shape) + (3,), 0.5)
+    for c in range(3):
+        for _ in range(6):
+            a, f, ph = rng.uniform(0, np.pi), rng.uniform(0.15, 0.45), rng.uniform(0, 2 * np.pi)
+            img[..., c] += 0.075 * np.sin(f * (np.cos(a) * x + np.sin(a) * y) + ph)
+    return to_u8(img)

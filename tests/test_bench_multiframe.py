@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _problems import to_u8, wave_texture
 
 from varflow import cli
 from varflow.evaluation import bench_multiframe as bm
@@ -25,17 +26,13 @@ CHEAP = {"n_warps": 1, "max_iterations": 5}
 CHEAP_FLAGS = ["--n-warps", "1", "--max-iterations", "5"]
 
 
-def _u8(img: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(np.asarray(img, np.float64) * 255.0), 0, 255).astype(np.uint8)
-
-
 def _write_rubberwhale(root: Path) -> None:
     """An 8-frame "RubberWhale" (frame07-frame14) with flow10.flo, under ``root``."""
     seq = make_sequence("affine", n_frames=8, shape=(48, 64), ref=3, magnitude=3.0, seed=2)
     d = root / "middlebury" / "other-data" / "RubberWhale"
     d.mkdir(parents=True)
     for i, n in enumerate(range(7, 15)):
-        write_image(d / f"frame{n:02d}.png", _u8(seq.frames[i]))
+        write_image(d / f"frame{n:02d}.png", to_u8(seq.frames[i]))
     gt = seq.trajectories[4] - seq.trajectories[3]
     gt[:4, :4] = 1e10  # unknown pixels, as in the real ground truth
     (root / "middlebury" / "other-gt-flow" / "RubberWhale").mkdir(parents=True)
@@ -52,7 +49,7 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for sub in ("clean/fake_1", "flow/fake_1", "occlusions/fake_1", "invalid/fake_1"):
         (tr / sub).mkdir(parents=True)
     for i, n in enumerate(range(1, 5)):
-        write_image(tr / "clean" / "fake_1" / f"frame_{n:04d}.png", _u8(s.frames[i]))
+        write_image(tr / "clean" / "fake_1" / f"frame_{n:04d}.png", to_u8(s.frames[i]))
     write_flo(tr / "flow" / "fake_1" / "frame_0001.flo", s.trajectories[1] - s.trajectories[0])
     write_flo(tr / "flow" / "fake_1" / "frame_0002.flo", s.trajectories[2] - s.trajectories[1])
     occ = np.zeros((40, 56), np.uint8)
@@ -69,19 +66,6 @@ ALLEY_GT = range(1, 11)  # frame_0001.flo ... frame_0010.flo, as on the real cli
 ALLEY_MASKED = 6  # the frame with occlusion and invalid masks
 
 
-def _texture(shape: tuple[int, int], shift: tuple[float, float], seed: int = 0) -> np.ndarray:
-    """A smooth colour texture (sum of plane waves) translated by ``shift`` = (x, y)."""
-    rng = np.random.default_rng(seed)
-    y, x = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
-    x, y = x - shift[0], y - shift[1]
-    img = np.full(shape + (3,), 0.5)
-    for c in range(3):
-        for _ in range(6):
-            a, f, ph = rng.uniform(0, np.pi), rng.uniform(0.15, 0.45), rng.uniform(0, 2 * np.pi)
-            img[..., c] += 0.075 * np.sin(f * (np.cos(a) * x + np.sin(a) * y) + ph)
-    return _u8(img)
-
-
 @pytest.fixture(scope="module")
 def alley_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A data folder with a fake 20-frame final/alley_1 and the fake RubberWhale."""
@@ -92,7 +76,8 @@ def alley_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
         (tr / sub / "alley_1").mkdir(parents=True)
     for n in range(1, ALLEY_FRAMES + 1):
         shift = ((n - 1) * ALLEY_V[0], (n - 1) * ALLEY_V[1])
-        write_image(tr / "final" / "alley_1" / f"frame_{n:04d}.png", _texture(ALLEY_SHAPE, shift))
+        write_image(tr / "final" / "alley_1" / f"frame_{n:04d}.png",
+                    wave_texture(ALLEY_SHAPE, shift))
     gt = np.empty(ALLEY_SHAPE + (2,), np.float32)
     gt[...] = ALLEY_V
     gt[-3:, -3:] = 1e10  # unknown pixels

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _problems import to_u8, wave_texture
 
 pytest.importorskip("skimage")
 
@@ -62,23 +63,6 @@ def _table_rows(text: str) -> dict[str, list[str]]:
 # --------------------------------------------------------------------------- fake data folder
 
 
-def _u8(img: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
-
-
-def _texture(shape: tuple[int, int], shift: tuple[float, float], seed: int = 0) -> np.ndarray:
-    """A smooth colour texture (sum of plane waves) translated by ``shift`` = (x, y)."""
-    rng = np.random.default_rng(seed)
-    y, x = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
-    x, y = x - shift[0], y - shift[1]
-    img = np.full(shape + (3,), 0.5)
-    for c in range(3):
-        for _ in range(6):
-            a, f, ph = rng.uniform(0, np.pi), rng.uniform(0.15, 0.45), rng.uniform(0, 2 * np.pi)
-            img[..., c] += 0.075 * np.sin(f * (np.cos(a) * x + np.sin(a) * y) + ph)
-    return _u8(img)
-
-
 FAKE_SHAPE = (40, 56)
 MB_SHIFT = (0.6, -0.4)
 SMALL = ("alley_2", "clean", 2)  # translation by SMALL_SHIFT, with masks
@@ -96,8 +80,8 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for i, seq in enumerate(MIDDLEBURY_SEQUENCES):
         d = root / "middlebury" / "other-data" / seq
         d.mkdir(parents=True)
-        write_image(d / "frame10.png", _texture(FAKE_SHAPE, (0, 0), seed=i))
-        write_image(d / "frame11.png", _texture(FAKE_SHAPE, MB_SHIFT, seed=i))
+        write_image(d / "frame10.png", wave_texture(FAKE_SHAPE, (0, 0), seed=i))
+        write_image(d / "frame11.png", wave_texture(FAKE_SHAPE, MB_SHIFT, seed=i))
         g = root / "middlebury" / "other-gt-flow" / seq
         g.mkdir(parents=True)
         write_flo(g / "flow10.flo", gt)
@@ -105,9 +89,9 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for (clip, pass_, n), shift in ((SMALL, SMALL_SHIFT), (LARGE, (12.0, 0.0))):
         for sub in (pass_, "flow", "occlusions", "invalid"):
             (tr / sub / clip).mkdir(parents=True, exist_ok=True)
-        write_image(tr / pass_ / clip / f"frame_{n:04d}.png", _texture(FAKE_SHAPE, (0, 0), 7))
+        write_image(tr / pass_ / clip / f"frame_{n:04d}.png", wave_texture(FAKE_SHAPE, (0, 0), 7))
         write_image(tr / pass_ / clip / f"frame_{n + 1:04d}.png",
-                    _texture(FAKE_SHAPE, SMALL_SHIFT if clip == SMALL[0] else (0, 0), 7))
+                    wave_texture(FAKE_SHAPE, SMALL_SHIFT if clip == SMALL[0] else (0, 0), 7))
         flow = np.empty(FAKE_SHAPE + (2,), np.float32)
         flow[...] = shift
         inv = np.zeros(FAKE_SHAPE, np.uint8)
@@ -129,7 +113,7 @@ def test_to_grey_uint8():
     rgb = np.random.default_rng(0).random((5, 6, 3)).astype(np.float32)
     luma = rgb[..., 0] * 0.2125 + rgb[..., 1] * 0.7154 + rgb[..., 2] * 0.0721
     np.testing.assert_array_equal(pe.to_grey_uint8(rgb), np.rint(luma * 255).astype(np.uint8))
-    u8 = _u8(rgb)
+    u8 = to_u8(rgb)
     grey8 = pe.to_grey_uint8(u8)
     assert grey8.dtype == np.uint8
     assert np.abs(grey8.astype(int) - np.rint(luma * 255)).max() <= 1

@@ -39,6 +39,7 @@ __all__ = [
     "split_overrides",
     "format_table",
     "write_csv",
+    "markdown_table",
 ]
 
 log = logging.getLogger(__name__)
@@ -317,34 +318,57 @@ def format_table(rows: Sequence[Mapping[str, Any]], baseline: str | None = None)
         line.append("")
         body.append(line)
 
+    return markdown_table(header, body)
+
+
+def _nanmean(values: Sequence[float]) -> float:
+    """Mean of the finite values (NaN if none)."""
+    arr = np.asarray(values, np.float64)
+    arr = arr[np.isfinite(arr)]
+    return float(arr.mean()) if arr.size else math.nan
+
+
+def _num(value: float, digits: int) -> str:
+    """``value`` with ``digits`` decimals, "-" if it is not finite."""
+    return f"{value:.{digits}f}" if math.isfinite(value) else "-"
+
+
+def markdown_table(header: Sequence[str], body: Sequence[Sequence[str]], n_left: int = 1) -> str:
+    """Aligned Markdown table: the first ``n_left`` columns left-aligned, the rest right.
+
+    The one renderer of the benchmark runners' tables.
+    """
     widths = [max(len(header[i]), *(len(b[i]) for b in body)) for i in range(len(header))]
 
     def render(cells: Sequence[str]) -> str:
-        parts = [cells[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(cells[1:], widths[1:],
-                                                                           strict=True)]
-        return "| " + " | ".join(parts) + " |"
+        left = [c.ljust(w) for c, w in zip(cells[:n_left], widths[:n_left], strict=True)]
+        right = [c.rjust(w) for c, w in zip(cells[n_left:], widths[n_left:], strict=True)]
+        return "| " + " | ".join(left + right) + " |"
 
-    sep = "|" + "|".join(
-        ("-" * (w + 2)) if i == 0 else ("-" * (w + 1) + ":") for i, w in enumerate(widths)
-    ) + "|"
+    sep = "|" + "|".join(("-" * (w + 2)) if i < n_left else ("-" * (w + 1) + ":")
+                         for i, w in enumerate(widths)) + "|"
     return "\n".join([render(header), sep] + [render(b) for b in body])
 
 
-def write_csv(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[str]) -> None:
+def write_csv(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[str],
+              fields: Sequence[str] = CSV_FIELDS) -> None:
     """Write benchmark rows to a CSV file atomically.
 
-    Columns are :data:`CSV_FIELDS` followed by any other keys of the rows (in order
-    of first appearance); missing values are written as empty cells.
+    Columns are ``fields`` (default :data:`CSV_FIELDS`, the Middlebury runner's)
+    followed by any other keys of the rows (in order of first appearance); missing
+    values and None are written as empty cells.
 
     Parameters
     ----------
     rows : sequence of mapping
     path : path-like
         Target file; its directory must exist.
+    fields : sequence of str
+        The leading columns, in order.
     """
     from ..io._atomic import atomic_write
 
-    fields = list(CSV_FIELDS)
+    fields = list(fields)
     for r in rows:
         for k in r:
             if k not in fields:

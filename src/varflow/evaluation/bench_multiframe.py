@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from ..registry import TRACKERS
+from .bench import markdown_table
 from .bench_trajectories import tracker_params
 from .datasets import (
     _HINT,
@@ -600,21 +601,7 @@ def format_multiframe_table(rows: Sequence[Mapping[str, Any]]) -> str:
                          _fmt(mean([r.get("aee_noc") for r in mine]), 4),
                          _fmt(mean([r.get("seconds") for r in mine]), 2),
                          _fmt(mean([ratio(r) for r in mine]), 3)])
-    return _markdown(header, body, n_left)
-
-
-def _markdown(header: Sequence[str], body: Sequence[Sequence[str]], n_left: int) -> str:
-    """Aligned Markdown table: the first ``n_left`` columns left-aligned, the rest right."""
-    widths = [max(len(header[i]), *(len(b[i]) for b in body)) for i in range(len(header))]
-
-    def render(cells: Sequence[str]) -> str:
-        left = [c.ljust(w) for c, w in zip(cells[:n_left], widths[:n_left], strict=True)]
-        right = [c.rjust(w) for c, w in zip(cells[n_left:], widths[n_left:], strict=True)]
-        return "| " + " | ".join(left + right) + " |"
-
-    sep = "|" + "|".join(("-" * (w + 2)) if i < n_left else ("-" * (w + 1) + ":")
-                         for i, w in enumerate(widths)) + "|"
-    return "\n".join([render(header), sep] + [render(b) for b in body])
+    return markdown_table(header, body, n_left)
 
 
 # ----------------------------------------------------------------------------- Table 4.1 protocol
@@ -1160,7 +1147,7 @@ def format_protocol_table(
     if len(keys) > 1:
         overall = {m: _mean_of([aee.get((ref, w, m)) for ref, w in keys]) for m in methods}
         body.append(["all", f"mean of {len(keys)} lines", ""] + cells(overall))
-    lines = [_markdown(header, body, 2), ""]
+    lines = [markdown_table(header, body, 2), ""]
 
     if not has_base:
         lines.append(f"no {baseline} rows: nothing to compare with")

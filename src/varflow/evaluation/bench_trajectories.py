@@ -37,7 +37,7 @@ from ..generators.photo import _MIN_SIZE as _PHOTO_MIN_SIZE
 from ..generators.photo import FAMILIES, SPLITS, make_photo_clip, photo_cases
 from ..generators.sequences import SCENES, VARIANTS, benchmark_suite
 from ..registry import TRACKERS, get_tracker, make_track_params
-from .bench import split_overrides
+from .bench import _nanmean, _num, markdown_table, split_overrides
 from .trajectory_metrics import occlusion_accuracy, trajectory_errors
 
 __all__ = [
@@ -412,30 +412,6 @@ def run_photo_trajectories(
     return rows
 
 
-def _nanmean(values: Sequence[float]) -> float:
-    arr = np.asarray(values, np.float64)
-    arr = arr[np.isfinite(arr)]
-    return float(arr.mean()) if arr.size else math.nan
-
-
-def _num(value: float, digits: int) -> str:
-    return f"{value:.{digits}f}" if math.isfinite(value) else "-"
-
-
-def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
-    """Aligned markdown table: first column left-aligned, the others right-aligned."""
-    widths = [max(len(header[i]), *(len(b[i]) for b in body)) for i in range(len(header))]
-
-    def render(cells: Sequence[str]) -> str:
-        out = [cells[0].ljust(widths[0])]
-        out += [c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]
-        return "| " + " | ".join(out) + " |"
-
-    sep = "|" + "|".join(("-" * (w + 2)) if i == 0 else ("-" * (w + 1) + ":")
-                         for i, w in enumerate(widths)) + "|"
-    return "\n".join([render(header), sep] + [render(b) for b in body])
-
-
 _PHOTO_COLUMNS = (("epe", "EPE", 4), ("far_epe", "far EPE", 4), ("occ_accuracy", "occ acc", 4),
                   ("hidden_recall", "hidden rec", 4), ("seconds", "s", 2))
 
@@ -500,5 +476,5 @@ def format_photo_table(rows: Sequence[Mapping[str, Any]]) -> str:
             line += ratios + [""] * (len(_PHOTO_COLUMNS) - 2)
         body.append(line)
         heading = f"{split} split (seeds {', '.join(map(str, seeds))})"
-        tables.append(heading + "\n" + _markdown(header, body))
+        tables.append(heading + "\n" + markdown_table(header, body))
     return "\n\n".join(tables)

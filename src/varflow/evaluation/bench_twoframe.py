@@ -33,7 +33,6 @@ the first method).  :func:`write_twoframe_csv` writes the rows.
 
 from __future__ import annotations
 
-import csv
 import logging
 import math
 import os
@@ -50,7 +49,7 @@ from ..generators.photo_pairs import FAMILIES as PHOTO_FAMILIES
 from ..generators.photo_pairs import SPLITS as PHOTO_SPLITS
 from ..generators.photo_pairs import make_photo_pair, photo_pair_cases
 from ..registry import get_method, make_params
-from .bench import split_overrides
+from .bench import _nanmean, _num, markdown_table, split_overrides, write_csv
 from .datasets import (
     _HINT,
     MIDDLEBURY_SEQUENCES,
@@ -555,29 +554,6 @@ def _val(row: Mapping[str, Any] | None, key: str) -> float:
     return float(v)
 
 
-def _nanmean(values: Sequence[float]) -> float:
-    arr = np.asarray(values, np.float64)
-    arr = arr[np.isfinite(arr)]
-    return float(arr.mean()) if arr.size else math.nan
-
-
-def _num(value: float, digits: int) -> str:
-    return f"{value:.{digits}f}" if math.isfinite(value) else "-"
-
-
-def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
-    widths = [max(len(header[i]), *(len(b[i]) for b in body)) for i in range(len(header))]
-
-    def render(cells: Sequence[str]) -> str:
-        out = [cells[0].ljust(widths[0])]
-        out += [c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]
-        return "| " + " | ".join(out) + " |"
-
-    sep = "|" + "|".join(("-" * (w + 2)) if i == 0 else ("-" * (w + 1) + ":")
-                         for i, w in enumerate(widths)) + "|"
-    return "\n".join([render(header), sep] + [render(b) for b in body])
-
-
 def _group_title(set_name: str, split: str | None, n: int) -> str:
     if set_name == "photo":
         seeds = PHOTO_SPLITS.get(split or "", ())
@@ -669,7 +645,7 @@ def _one_table(rows: Sequence[Mapping[str, Any]], baseline: str | None) -> str:
                 mine = _nanmean([get(s, m, k) for s in both])
                 ratio.append(_num(mine / base if base > 0 else math.nan, 2))
         body.append(ratio)
-    return _markdown(header, body)
+    return markdown_table(header, body)
 
 
 def format_twoframe_table(
@@ -737,15 +713,4 @@ def write_twoframe_csv(rows: Sequence[Mapping[str, Any]], path: str | os.PathLik
     path : path-like
         Target file; its directory must exist.
     """
-    from ..io._atomic import atomic_write
-
-    fields = list(TWOFRAME_CSV_FIELDS)
-    for r in rows:
-        for k in r:
-            if k not in fields:
-                fields.append(k)
-    with atomic_write(path, "w") as f:
-        w = csv.DictWriter(f, fieldnames=fields, restval="", lineterminator="\n")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    write_csv(rows, path, TWOFRAME_CSV_FIELDS)

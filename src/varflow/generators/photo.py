@@ -181,6 +181,7 @@ __all__ = [
     "load_photo",
     "make_photo_clip",
     "photo_cases",
+    "split_cases",
     "photo_suite",
 ]
 
@@ -1217,13 +1218,34 @@ def photo_cases(split: str, families: Sequence[str] = FAMILIES) -> list[tuple[st
     -------
     list of (str, int)
     """
+    return split_cases(split, families, FAMILIES)
+
+
+def split_cases(split: str, families: Sequence[str],
+                known: Sequence[str]) -> list[tuple[str, int]]:
+    """The ``(family, seed)`` cases of a split for any family list, family-major.
+
+    Shared by :func:`photo_cases` and :func:`varflow.generators.photo_pairs.photo_pair_cases`.
+
+    Parameters
+    ----------
+    split : {"tuning", "reporting"}
+    families : sequence of str
+        Checked against ``known``.
+    known : sequence of str
+        The generator's family names.
+
+    Returns
+    -------
+    list of (str, int)
+    """
     if split not in SPLITS:
         raise ValueError(f"split: expected one of {tuple(SPLITS)}, got {split!r}")
     if isinstance(families, str):
         raise ValueError(f"families: expected a sequence of names, got the string {families!r}")
     for f in families:
-        if f not in FAMILIES:
-            raise ValueError(f"families: expected names from {FAMILIES}, got {f!r}")
+        if f not in known:
+            raise ValueError(f"families: expected names from {known}, got {f!r}")
     return [(f, s) for f in families for s in SPLITS[split]]
 
 

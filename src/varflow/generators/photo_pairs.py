@@ -100,6 +100,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import convolve, gaussian_filter
 
+from ..ops.warp import in_bounds
 from .photo import (
     _MAX_SPEED,
     REPORTING_SEEDS,
@@ -115,6 +116,7 @@ from .photo import (
     _PhotoTexture,
     _render,
     _wave_sheet,
+    split_cases,
 )
 from .sequences import _AffineMotion, _calibrate, _check_float, _check_int, _trajectories
 
@@ -516,10 +518,7 @@ def make_photo_pair(
     params["max_displacement"] = float(disp.max())
     params["mean_displacement"] = float(disp.mean())
     params["occluded_fraction"] = float(1.0 - valid.mean())
-    yy, xx = np.mgrid[0:h, 0:w]
-    tx, ty = xx + flow[..., 0], yy + flow[..., 1]
-    outside = (tx < 0) | (tx > w - 1) | (ty < 0) | (ty > h - 1)
-    params["out_of_frame_fraction"] = float(outside.mean())
+    params["out_of_frame_fraction"] = float((~in_bounds(flow)).mean())
     return PhotoPair(
         frame0=np.ascontiguousarray(frames[0]),
         frame1=np.ascontiguousarray(frames[1]),
@@ -552,11 +551,4 @@ def photo_pair_cases(split: str, families: Sequence[str] = FAMILIES) -> list[tup
     ValueError
         Unknown split (``split: ...``) or family (``families: ...``).
     """
-    if split not in SPLITS:
-        raise ValueError(f"split: expected one of {tuple(SPLITS)}, got {split!r}")
-    if isinstance(families, str):
-        raise ValueError(f"families: expected a sequence of names, got the string {families!r}")
-    for f in families:
-        if f not in FAMILIES:
-            raise ValueError(f"families: expected names from {FAMILIES}, got {f!r}")
-    return [(f, s) for f in families for s in SPLITS[split]]
+    return split_cases(split, families, FAMILIES)
