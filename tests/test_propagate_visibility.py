@@ -58,6 +58,14 @@ def test_propagation_repair_and_direct_candidates(fast_disc) -> None:
     fixed = propagate_trajectories(s.frames, s.ref, p, pyrs)
     # the repair stops the disc's edge band from drifting with the background
     assert _far_epe(fixed, s)[0] < 0.5 * _far_epe(plain, s)[0]
+    # without repair_adjacent the frames ref +- 1 keep their pyramid flows untouched,
+    # the others are repaired as before
+    skip = propagate_trajectories(s.frames, s.ref, p, pyrs, repair_adjacent=False)
+    for n in (s.ref - 1, s.ref + 1):
+        np.testing.assert_array_equal(skip[n], plain[n])
+        assert not np.array_equal(fixed[n], plain[n])
+    for n in (0, s.ref + 2, s.n_frames - 1):
+        assert not np.array_equal(skip[n], plain[n])
     st: dict = {}
     both = propagate_trajectories(s.frames, s.ref, p, pyrs, direct=True, stats=st)
     assert st["flows"] == 2 * (s.n_frames - 1) - 2  # r ± 1 have one candidate only

@@ -7,10 +7,13 @@ import varflow
 from varflow.evaluation.trajectory_metrics import trajectory_errors
 from varflow.generators.sequences import make_sequence
 from varflow.multiframe.rlr import (
+    Coupling,
     RLRParams,
+    adjacent_factor,
     link_channels,
     prox_certified,
     prox_faces,
+    refine_trajectories,
     track_rlr,
     ustep_iterations,
     ustep_iterations_numpy,
@@ -233,6 +236,46 @@ def test_alternations_relinearise_about_the_warp_start(small_seq):
     assert e2 < 1.15 * e1 and e1 < 0.3, (e1, e2)
 
 
+def test_adjacent_frames_take_their_own_link_weight(small_seq):
+    # A fixed, wrong coupling target (u = 3 px everywhere): with the
+    # adjacent weight 0 the frames ref +- 1 are solved as if unlinked, the others
+    # are pulled towards the target.
+    s = small_seq
+    frames = check_frames(s.frames)
+    params = RLRParams(n_warps=2, max_iterations=20, visibility=False, final_repair=False)
+
+    def target(traj, visible):
+        t = np.zeros_like(traj)
+        t[..., 0] = 3.0
+        return t
+
+    free = refine_trajectories(frames, s.ref, params, Coupling("l1", 0.0, target))
+    split = refine_trajectories(frames, s.ref, params,
+                                Coupling("l1", 2.0, target, adjacent_factor=0.0))
+    for n in (s.ref - 1, s.ref + 1):
+        np.testing.assert_allclose(split[n], free[n], atol=1e-4)
+    for n in (0, 6):
+        pull_free = np.abs(free[n, ..., 0] - 3.0).mean()
+        pull_split = np.abs(split[n, ..., 0] - 3.0).mean()
+        assert pull_split < 0.75 * pull_free, (n, pull_split, pull_free)  # 0.58 measured
+
+
+def test_adjacent_link_factor_follows_the_frames_noise():
+    rng = np.random.default_rng(3)
+    clean = check_frames(make_sequence("affine", n_frames=3, shape=(64, 80), magnitude=2.0,
+                                       seed=1).frames)
+    params = RLRParams()
+    assert adjacent_factor(clean, 1, params) == pytest.approx(params.adjacent_link_factor)
+    # residual noise hypot(0.06, 0.06) = 0.085 > sigma_0 = 0.08: linked like the others
+    noisy = np.clip(clean + rng.normal(0, 0.06, clean.shape), 0, 1).astype(np.float32)
+    assert adjacent_factor(noisy, 1, params) == 1.0
+    # in between, the square of the noise ratio
+    mid = np.clip(clean + rng.normal(0, 0.03, clean.shape), 0, 1).astype(np.float32)
+    a = adjacent_factor(mid, 1, params)
+    assert 0.2 < a < 0.45, a
+    assert adjacent_factor(clean, 1, params.replace(adjacent_link_factor=1.0)) == 1.0
+
+
 @pytest.mark.parametrize(
     "field, value",
     [("link_weight", -1.0), ("pcp_scale", 0.0), ("primal_step", 0.0), ("alternations", 0),
@@ -241,7 +284,8 @@ def test_alternations_relinearise_about_the_warp_start(small_seq):
      ("hidden_link_weight", -1.0), ("hidden_data_weight", 1.5), ("rank_rule", "svd"),
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
-     ("gradient_weight", 40.0), ("data_normalisation", 0.05)],
+     ("gradient_weight", 40.0), ("data_normalisation", 0.05),
+     ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):

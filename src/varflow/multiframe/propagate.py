@@ -25,7 +25,10 @@ candidate wins ties.  For ``n = r ± 1`` there is nothing to propagate and only 
 direct flow is computed.  Last, :func:`varflow.ops.fusion.repair` lets every pixel
 take the vector of a pixel a few pixels away where that fits the frames better:
 the coarse-to-fine smoothing leaves a band of the wrong motion along object
-edges, and a propagated band would grow by a pixel or so per frame.
+edges, and a propagated band would grow by a pixel or so per frame.  The frames
+``r ± 1`` can skip the repair (``repair_adjacent=False``): their flows were not
+propagated, and on real footage the photometric cost is the less reliable of
+the two.
 
 Every frame is pre-processed and its pyramid built once
 (:func:`frame_pyramids`); the pyramids are shared by every pair and by the
@@ -97,6 +100,7 @@ def propagate_trajectories(
     levels: int = 3,
     direct: bool = False,
     repair_distances: tuple[int, ...] = (2, 4, 8),
+    repair_adjacent: bool = True,
     support_radius: int = 2,
     support_gamma: float = 0.1,
     callback: TrackCallback | None = None,
@@ -120,6 +124,12 @@ def propagate_trajectories(
         False keeps the propagated candidates alone.
     repair_distances : tuple of int
         Offsets of :func:`varflow.ops.fusion.repair`; empty = no repair.
+    repair_adjacent : bool
+        Repair the frames ``ref ± 1`` too.  Their flows come from the whole
+        pyramid, not from a propagated neighbour, so no band has grown along the
+        object edges, and on real footage the photometric cost of the repair is
+        less reliable than the flow (see
+        :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_adjacent`).
     support_radius, support_gamma : int, float
         Window radius R and colour scale γ of the photometric cost
         (:func:`varflow.ops.fusion.support_weights` of the reference frame).
@@ -160,7 +170,7 @@ def propagate_trajectories(
             kept_direct.append(float(choice.mean()))
         else:
             flow = cands[0]
-        if repair_distances:
+        if repair_distances and (repair_adjacent or abs(n - ref) > 1):
             rs: dict = {}
             flow = repair(frames[ref], frames[n], flow, weights, repair_distances, stats=rs,
                           margin=repair_margin(frames[ref], frames[n]))
