@@ -78,6 +78,7 @@ from .tvl1 import (
     kernel_tensor,
     linearise,
     planar,
+    require_colour_term,
     run_warp,
 )
 
@@ -222,10 +223,7 @@ class SparseParams(TensorParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("gradient_weight", "data_normalisation"):  # not in the sparse stage yet
-            _check(getattr(self, name) == 0, name,
-                   f"must be 0 here: the sparse stage uses the colour term only, got "
-                   f"{getattr(self, name)}")
+        require_colour_term(self, "the sparse stage")  # not in the sparse stage yet
         _check(self.regulariser in ("tv", "tensor"), "regulariser",
                f"must be 'tv' or 'tensor', got {self.regulariser!r}")
         _check(self.dictionary in ("mod", "dct"), "dictionary",

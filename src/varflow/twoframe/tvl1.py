@@ -509,6 +509,20 @@ def robust_data_term(params: TVL1Params) -> bool:
     return params.gradient_weight > 0 or params.data_normalisation > 0
 
 
+def require_colour_term(params: TVL1Params, stage: str) -> None:
+    """Refuse γ ≠ 0 or ζ ≠ 0 for a method whose ``stage`` has the colour term only.
+
+    Raises
+    ------
+    ValueError
+        Naming the field (``gradient_weight: ...`` or ``data_normalisation: ...``).
+    """
+    for name in ("gradient_weight", "data_normalisation"):
+        _check(getattr(params, name) == 0, name,
+               f"must be 0 here: {stage} uses the colour term only, got "
+               f"{getattr(params, name)}")
+
+
 def _smooth(x: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian smoothing of the rows and columns of an ``(H, W, K)`` array (σ in pixels)."""
     if sigma <= 0:
