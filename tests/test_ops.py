@@ -109,6 +109,17 @@ def test_warp_engines_agree_and_integer_shift_is_exact():
     assert not inside[0].any() and not inside[:, -2:].any() and inside[1:, :-2].all()
 
 
+def test_warp_engines_agree_on_many_planes():
+    # the driver warps 3C planes (colour, x and y derivatives) in one call
+    rng = np.random.default_rng(15)
+    planes = rng.random((27, 35, 9)).astype(np.float32)
+    flow = (rng.normal(size=(27, 35, 2)) * 2 + 0.5).astype(np.float32)
+    a, ia = warp_bicubic(planes, flow)
+    b, ib = warp_bicubic_numpy(planes, flow)
+    np.testing.assert_allclose(a, b, atol=2e-5)
+    np.testing.assert_array_equal(ia, ib)
+
+
 def test_warp_nan_flow_is_outside():
     planes = np.ones((8, 8, 1), np.float32)
     flow = np.zeros((8, 8, 2), np.float32)

@@ -7,7 +7,8 @@ import pytest
 
 import varflow
 from varflow.generators.pairs import TextureField, synthetic_pair
-from varflow.twoframe.tvl1 import TVL1Params, solve_warp
+from varflow.ops.warp import warp_bicubic
+from varflow.twoframe.tvl1 import TVL1Params, linearise, linearise_numpy, solve_warp
 
 
 def aee(a, b):
@@ -150,3 +151,21 @@ def test_progress_callback_counts_every_warp():
     varflow.flow(f0, f1, n_warps=2, callback=lambda d, t: calls.append((d, t)))
     total = calls[-1][1]
     assert [c[0] for c in calls] == list(range(1, total + 1)) and total % 2 == 0
+
+
+def test_linearise_engines_agree_on_the_drivers_strided_views():
+    # the driver hands the solver views into one (H, W, 3C) warped array
+    rng = np.random.default_rng(11)
+    h, w, c = 23, 31, 3
+    i0 = rng.random((h, w, c), dtype=np.float32)
+    planes = rng.random((h, w, 3 * c), dtype=np.float32)
+    flow = (rng.normal(size=(h, w, 2)) * 4).astype(np.float32)
+    warped, inside = warp_bicubic(planes, flow)
+    assert 0 < inside.sum() < h * w
+    views = (i0, warped[..., :c], warped[..., c:2 * c], warped[..., 2 * c:], inside, flow)
+    got = linearise(*views)
+    want = linearise_numpy(*views)
+    for g, e in zip(got, want, strict=True):
+        assert g.shape == (c, h, w) and g.dtype == np.float32 and g.flags.c_contiguous
+        np.testing.assert_allclose(g, e, rtol=1e-6, atol=1e-6)
+        assert not g[:, ~inside].any()

@@ -97,6 +97,7 @@ def _warp_kernel(planes, flow, out, inside):
         wy = np.empty(4, np.float32)
         xs = np.empty(4, np.int64)
         ys = np.empty(4, np.int64)
+        acc = np.empty(k, np.float32)
         for j in range(w):
             x = j + flow[i, j, 0]
             y = i + flow[i, j, 1]
@@ -124,14 +125,18 @@ def _warp_kernel(planes, flow, out, inside):
             for n in range(4):
                 xs[n] = min(max(ix0 + n - 1, 0), w - 1)
                 ys[n] = min(max(iy0 + n - 1, 0), h - 1)
+            # taps outer, channels inner: the K planes of a tap are contiguous
             for c in range(k):
-                acc = 0.0
-                for m in range(4):
-                    row = 0.0
-                    for n in range(4):
-                        row += wx[n] * planes[ys[m], xs[n], c]
-                    acc += wy[m] * row
-                out[i, j, c] = acc
+                acc[c] = 0.0
+            for m in range(4):
+                ym = ys[m]
+                for n in range(4):
+                    wt = wy[m] * wx[n]
+                    xn = xs[n]
+                    for c in range(k):
+                        acc[c] += wt * planes[ym, xn, c]
+            for c in range(k):
+                out[i, j, c] = acc[c]
 
 
 def warp_bicubic(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -481,8 +481,40 @@ def planar(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(x, -1, 0), dtype=np.float32)
 
 
+def linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
+    """Reference NumPy implementation of :func:`linearise`."""
+    m = inside[..., None].astype(np.float32)
+    ixh = I1w_dx * m
+    iyh = I1w_dy * m
+    ah = (I1w - I0 - ixh * flow0[..., :1] - iyh * flow0[..., 1:2]) * m
+    return planar(ixh), planar(iyh), planar(ah)
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
+    h, w, nc = I0.shape
+    for i in nb.prange(h):
+        for j in range(w):
+            if inside[i, j]:
+                u0 = flow0[i, j, 0]
+                v0 = flow0[i, j, 1]
+                for c in range(nc):
+                    gx = I1w_dx[i, j, c]
+                    gy = I1w_dy[i, j, c]
+                    ix[c, i, j] = gx
+                    iy[c, i, j] = gy
+                    a[c, i, j] = I1w[i, j, c] - I0[i, j, c] - gx * u0 - gy * v0
+            else:
+                for c in range(nc):
+                    ix[c, i, j] = 0.0
+                    iy[c, i, j] = 0.0
+                    a[c, i, j] = 0.0
+
+
 def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
     """The linearised colour constancy residual ``ρ_c(u) = a_c + ∇I1w_c · u`` of one warp.
+
+    A Numba kernel; :func:`linearise_numpy` is its reference.
 
     Parameters
     ----------
@@ -497,11 +529,14 @@ def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
     ix, iy, a : ndarray, shape (C, H, W), float32, planar
         ``a = I1w - I0 - ∇I1w · flow0``.
     """
-    m = inside[..., None].astype(np.float32)
-    ixh = I1w_dx * m
-    iyh = I1w_dy * m
-    ah = (I1w - I0 - ixh * flow0[..., :1] - iyh * flow0[..., 1:2]) * m
-    return planar(ixh), planar(iyh), planar(ah)
+    h, w, nc = I0.shape
+    ix = np.empty((nc, h, w), np.float32)
+    iy = np.empty_like(ix)
+    a = np.empty_like(ix)
+    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy, flow0)]
+    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], np.asarray(inside, np.bool_), f32[4],
+                      ix, iy, a)
+    return ix, iy, a
 
 
 def robust_data_term(params: TVL1Params) -> bool:
