@@ -54,7 +54,7 @@ def _timed(module: Any, name: str, key: str) -> None:
 
 def _instrument() -> None:
     _timed(c2f, "prepare_pyramid", "pyramid+rof")
-    _timed(c2f, "image_derivatives", "derivatives")
+    _timed(c2f, "derivative_planes", "derivatives")
     _timed(c2f, "warp_bicubic", "warp")
     _timed(c2f, "median_filter_flow", "median")
     _timed(tv, "data_channels", "linearise")

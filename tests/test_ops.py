@@ -3,12 +3,20 @@
 import numpy as np
 import pytest
 
-from varflow.ops.differences import divergence, gradient, image_derivatives
+from varflow.ops.differences import (
+    derivative_planes,
+    derivative_planes_numpy,
+    divergence,
+    gradient,
+    image_derivatives,
+)
 from varflow.ops.median import median_filter_flow, median_filter_flow_numpy
 from varflow.ops.prox import (
     clip_unit,
     linear_l1_energy,
     project_l2_ball,
+    prox_huber_conjugate,
+    prox_huber_norm,
     prox_l2_norm,
     prox_linear_l1,
     prox_linear_l1_exact,
@@ -46,12 +54,43 @@ def test_image_derivatives_exact_on_quadratic():
     np.testing.assert_allclose(dy[inner], (0.002 * xx)[2:-2, 2:-2], atol=1e-5)
 
 
+@pytest.mark.parametrize("shape", [(1, 1, 1), (3, 2, 3), (29, 37, 3)])
+def test_derivative_planes_engines_agree(shape):
+    img = np.random.default_rng(8).random(shape, dtype=np.float32)
+    got = derivative_planes(img)
+    assert got.shape == shape[:2] + (3 * shape[2],) and got.dtype == np.float32
+    np.testing.assert_allclose(got, derivative_planes_numpy(img), atol=1e-6)
+
+
 def test_moreau_soft_threshold_and_l2():
     rng = np.random.default_rng(1)
     x = rng.normal(size=(50, 2)) * 3
     for t in (0.1, 1.0, 4.0):
         np.testing.assert_allclose(soft_threshold(x, t) + t * clip_unit(x / t), x, atol=1e-12)
         np.testing.assert_allclose(prox_l2_norm(x, t) + t * project_l2_ball(x / t), x, atol=1e-12)
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.05, 0.5])
+def test_moreau_huber_pair(eps):
+    rng = np.random.default_rng(21)
+    x = rng.normal(size=(200, 2)) * rng.choice([0.01, 0.3, 3.0], size=(200, 1))
+    r = rng.uniform(0.05, 1.0, size=200)
+    t = 0.7
+    left = prox_huber_norm(x, t, eps, r) + t * prox_huber_conjugate(x / t, 1 / t, eps, r)
+    np.testing.assert_allclose(left, x, atol=1e-10)
+    # the prox minimises its energy: better than random perturbations
+    y = prox_huber_norm(x, t, eps, r)
+
+    def energy(z):
+        n = np.sqrt((z * z).sum(-1))
+        hub = np.where(n <= eps, n * n / (2 * eps) if eps else 0 * n, n - eps / 2)
+        return t * r * hub + ((z - x) ** 2).sum(-1) / 2
+
+    for _ in range(5):
+        z = y + rng.normal(size=y.shape) * 0.01
+        assert np.all(energy(z) >= energy(y) - 1e-12)
+    if eps == 0:
+        np.testing.assert_allclose(y, prox_l2_norm(x, t * r[:, None]), atol=1e-12)
 
 
 def test_project_l2_ball_radius_map():

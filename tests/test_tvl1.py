@@ -123,6 +123,7 @@ _BAD_VALUES = {
     "data_weight": 0.0, "coupling": -0.1, "tv_step": 0.3, "max_iterations": 0,
     "tolerance": -1.0, "edge_weight": -1.0, "edge_weight_min": 0.0, "data_sweeps": 0,
     "gradient_weight": -1.0, "gradient_sigma": -1.0, "data_normalisation": -1.0,
+    "huber": -0.1,
 }
 
 

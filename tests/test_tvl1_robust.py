@@ -129,6 +129,8 @@ def test_gradient_sigma_follows_the_pyramid_level():
     {"gradient_weight": 30.0},
     {"gradient_weight": 30.0, "data_normalisation": 0.05, "data_weight": 1.0},
     {"data_normalisation": 0.05, "data_weight": 1.0},
+    {"huber": 0.05},
+    {"huber": 0.2, "gradient_weight": 30.0},
 ])
 def test_numba_and_numpy_engines_agree(extra):
     f0, f1, gt = synthetic_pair("smooth", shape=(48, 56), magnitude=1.5, channels=3, seed=5)
@@ -200,6 +202,7 @@ _BAD = {
     "gradient_weight": [-1.0, math.nan, math.inf],
     "gradient_sigma": [-0.5, math.nan, math.inf],
     "data_normalisation": [-0.01, math.nan, math.inf],
+    "huber": [-0.01, math.nan, math.inf],
 }
 
 

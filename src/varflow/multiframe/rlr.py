@@ -104,7 +104,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from ..ops.differences import divergence, gradient, image_derivatives
+from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import noise_sigma, repair, repair_margin, support_weights
 from ..ops.median import median_filter_flow
 from ..ops.prox import project_l2_ball, prox_linear_l1, prox_linear_l1_exact
@@ -1111,8 +1111,7 @@ def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
     (no l1 link) or the link-to-data ratio (scalar or (H, W)).
     """
     n_ch = i0.shape[2]
-    dx, dy = image_derivatives(i1)
-    warped, inside = warp_bicubic(np.concatenate([i1, dx, dy], axis=2), about)
+    warped, inside = warp_bicubic(derivative_planes(i1), about)
     if visible is not None and hidden_data_weight == 0:
         inside &= visible
     lin = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],

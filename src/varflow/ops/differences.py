@@ -12,9 +12,11 @@ component.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
-__all__ = ["gradient", "divergence", "image_derivatives"]
+__all__ = ["gradient", "divergence", "image_derivatives", "derivative_planes",
+           "derivative_planes_numpy"]
 
 
 def gradient(u: np.ndarray) -> np.ndarray:
@@ -81,3 +83,51 @@ def image_derivatives(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     dx = (pad[2:-2, :-4] - 8 * pad[2:-2, 1:-3] + 8 * pad[2:-2, 3:-1] - pad[2:-2, 4:]) * c
     dy = (pad[:-4, 2:-2] - 8 * pad[1:-3, 2:-2] + 8 * pad[3:-1, 2:-2] - pad[4:, 2:-2]) * c
     return np.ascontiguousarray(dx, dtype=np.float32), np.ascontiguousarray(dy, dtype=np.float32)
+
+
+def derivative_planes_numpy(image: np.ndarray) -> np.ndarray:
+    """Reference NumPy implementation of :func:`derivative_planes`."""
+    img = np.asarray(image, dtype=np.float32)
+    return np.concatenate([img, *image_derivatives(img)], axis=2)
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _derivative_planes_kernel(img, out):
+    h, w, nc = img.shape
+    c1 = np.float32(1.0 / 12.0)
+    for i in nb.prange(h):
+        im2 = max(i - 2, 0)
+        im1 = max(i - 1, 0)
+        ip1 = min(i + 1, h - 1)
+        ip2 = min(i + 2, h - 1)
+        for j in range(w):
+            jm2 = max(j - 2, 0)
+            jm1 = max(j - 1, 0)
+            jp1 = min(j + 1, w - 1)
+            jp2 = min(j + 2, w - 1)
+            for c in range(nc):
+                out[i, j, c] = img[i, j, c]
+                out[i, j, nc + c] = (img[i, jm2, c] - 8 * img[i, jm1, c]
+                                     + 8 * img[i, jp1, c] - img[i, jp2, c]) * c1
+                out[i, j, 2 * nc + c] = (img[im2, j, c] - 8 * img[im1, j, c]
+                                         + 8 * img[ip1, j, c] - img[ip2, j, c]) * c1
+
+
+def derivative_planes(image: np.ndarray) -> np.ndarray:
+    """The image and its :func:`image_derivatives` stacked: the planes a warp samples.
+
+    One Numba pass (:func:`derivative_planes_numpy` is the reference).
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, C), float32
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3C), float32
+        ``[I, dI/dx, dI/dy]`` along the last axis.
+    """
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    out = np.empty(img.shape[:2] + (3 * img.shape[2],), np.float32)
+    _derivative_planes_kernel(img, out)
+    return out

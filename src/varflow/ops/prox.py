@@ -27,6 +27,8 @@ __all__ = [
     "clip_unit",
     "prox_l2_norm",
     "project_l2_ball",
+    "prox_huber_norm",
+    "prox_huber_conjugate",
     "prox_linear_l1",
     "prox_linear_l1_exact",
     "linear_l1_energy",
@@ -65,6 +67,39 @@ def project_l2_ball(p: np.ndarray, radius: float | np.ndarray = 1.0) -> np.ndarr
     if r.ndim:
         r = r[..., None]
     return p / np.maximum(1.0, nrm / np.maximum(r, 1e-30))
+
+
+def prox_huber_norm(x: np.ndarray, t: float, eps: float,
+                    radius: float | np.ndarray = 1.0) -> np.ndarray:
+    """Prox of ``t r h_ε(x)``, ``h_ε`` the Huber function of the L2 norm (last axis).
+
+    ``h_ε(x) = |x|²/(2ε)`` for ``|x| ≤ ε``, ``|x| - ε/2`` beyond; ``r = radius``
+    (e.g. the edge weight g).  Quadratic near zero, so a regulariser built on it does
+    not staircase smooth ramps (Huber-TV; Werlberger, Trobin, Pock et al. 2009).
+    Moreau partner of :func:`prox_huber_conjugate`:
+    ``x = prox_huber_norm(x, t, ε, r) + t prox_huber_conjugate(x / t, 1 / t, ε, r)``.
+    ``ε = 0`` gives :func:`prox_l2_norm` with ``t r``.
+    """
+    r = np.asarray(radius, dtype=x.dtype)
+    if r.ndim:
+        r = r[..., None]
+    nrm = np.sqrt((x * x).sum(-1, keepdims=True))
+    tr = t * r
+    small = x * (eps / np.maximum(eps + tr, 1e-30))
+    shrink = x * np.maximum(0.0, 1.0 - tr / np.maximum(nrm, 1e-30))
+    return np.where(nrm <= eps + tr, small, shrink)
+
+
+def prox_huber_conjugate(p: np.ndarray, s: float, eps: float,
+                         radius: float | np.ndarray = 1.0) -> np.ndarray:
+    """Prox of ``s (r h_ε)*``: ``Π_{|p| ≤ r}(p / (1 + s ε / r))`` over the last axis.
+
+    ``(r h_ε)*(p) = ε |p|² / (2 r) + δ(|p| ≤ r)``: the dual step of Huber-TV, the
+    dual step of TV (:func:`project_l2_ball`) after a shrinkage by ``1 + s ε / r``.
+    """
+    r = np.asarray(radius, dtype=p.dtype)
+    rb = r[..., None] if r.ndim else r
+    return project_l2_ball(p / (1.0 + s * eps / np.maximum(rb, 1e-30)), r)
 
 
 def linear_l1_energy(d, u, a, gx, gy, t):

@@ -27,7 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .._validate import check_pair
-from ..ops.differences import image_derivatives
+from ..ops.differences import derivative_planes
 from ..ops.median import median_filter_flow
 from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_flow
 from ..ops.rof import structure_texture
@@ -278,8 +278,7 @@ def coarse_to_fine_pyramids(
         i0, i1 = pyr0[level], pyr1[level]
         if flow.shape[:2] != i0.shape[:2]:
             flow = resize_flow(flow, i0.shape[:2])
-        dx, dy = image_derivatives(i1)
-        planes = np.concatenate([i1, dx, dy], axis=2)
+        planes = derivative_planes(i1)
         state = {"level": level, "previous": state, "stats": stats}
         state["previous"].pop("previous", None)  # keep only one level of history
         for k in range(params.level_warps(i0.shape[:2])):

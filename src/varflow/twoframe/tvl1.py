@@ -35,7 +35,8 @@ unchanged (:func:`data_channels` builds the channels).
 
 Symbol map: λ = ``data_weight``, θ = ``coupling``, τ = ``tv_step``,
 ε = ``tolerance``, c of g(x) = exp(-c |∇I|²) = ``edge_weight``,
-γ = ``gradient_weight``, σ_g = ``gradient_sigma``, ζ = ``data_normalisation``.
+γ = ``gradient_weight``, σ_g = ``gradient_sigma``, ζ = ``data_normalisation``,
+ε_H = ``huber`` (Huber-TV: the dual step ``Π_{|p| ≤ g}((p + (τ/θ)∇u) / (1 + τ ε_H / (θ g)))``).
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..ops.differences import divergence, gradient, image_derivatives
-from ..ops.prox import project_l2_ball, prox_linear_l1
+from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
 
@@ -113,6 +114,11 @@ class TVL1Params(CoarseToFineParams):
         measures a distance in pixels to its constraint line; λ and γ then weigh
         pixels, not intensities (retune them: the scale of the data term grows by
         up to 1/ζ).  0 turns it off.  Default 0.
+    huber : float
+        ε_H of Huber-TV (Werlberger et al. 2009), in flow-gradient units (pixels per
+        pixel): the regulariser is quadratic, ``g |∇u_k|²/(2ε_H)``, below ε_H and TV
+        above, so smooth (affine, non-rigid) motion does not staircase.  0 gives TV.
+        Default 0.
     """
 
     data_weight: float = 40.0
@@ -126,6 +132,7 @@ class TVL1Params(CoarseToFineParams):
     gradient_weight: float = 0.0
     gradient_sigma: float = 1.0
     data_normalisation: float = 0.0
+    huber: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -157,6 +164,11 @@ class TVL1Params(CoarseToFineParams):
             math.isfinite(self.data_normalisation) and self.data_normalisation >= 0,
             "data_normalisation",
             f"must be a finite number >= 0, got {self.data_normalisation}",
+        )
+        _check(
+            math.isfinite(self.huber) and self.huber >= 0,
+            "huber",
+            f"must be a finite number >= 0, got {self.huber}",
         )
 
 
@@ -279,13 +291,19 @@ def _project(px, py, lim):
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _dual_row(u, p, tp, g, tens, i, step, aniso):
-    """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``."""
+def _dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
+    """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``.
+
+    With ``huber`` = ε_H > 0 the Huber-TV step
+    ``Π_{|p| ≤ g}((p + step T∇u) / (1 + step ε_H / g))``
+    (:func:`varflow.ops.prox.prox_huber_conjugate`).
+    """
     h = u.shape[1]
     w = u.shape[2]
     cy = step if i < h - 1 else _F0
     ip = min(i + 1, h - 1)
     gr = g[i]
+    se = step * huber
     for k in range(2):
         uc = u[k, i]
         un = u[k, ip]
@@ -293,13 +311,22 @@ def _dual_row(u, p, tp, g, tens, i, step, aniso):
         pxr = p[2 * k, i]
         pyr = p[2 * k + 1, i]
         if not aniso:
-            for j in range(w - 1):
-                px, py = _project(pxr[j] + step * (ucr[j] - uc[j]),
-                                  pyr[j] + cy * (un[j] - uc[j]), gr[j])
-                pxr[j] = px
-                pyr[j] = py
+            if se > 0:
+                for j in range(w - 1):
+                    hb = _F1 / (_F1 + se / gr[j])
+                    px, py = _project((pxr[j] + step * (ucr[j] - uc[j])) * hb,
+                                      (pyr[j] + cy * (un[j] - uc[j])) * hb, gr[j])
+                    pxr[j] = px
+                    pyr[j] = py
+            else:
+                for j in range(w - 1):
+                    px, py = _project(pxr[j] + step * (ucr[j] - uc[j]),
+                                      pyr[j] + cy * (un[j] - uc[j]), gr[j])
+                    pxr[j] = px
+                    pyr[j] = py
             j = w - 1
-            px, py = _project(pxr[j], pyr[j] + cy * (un[j] - uc[j]), gr[j])
+            hb = _F1 / (_F1 + se / gr[j])
+            px, py = _project(pxr[j] * hb, (pyr[j] + cy * (un[j] - uc[j])) * hb, gr[j])
             pxr[j] = px
             pyr[j] = py
         else:
@@ -314,8 +341,9 @@ def _dual_row(u, p, tp, g, tens, i, step, aniso):
                 t11 = t11r[j]
                 t12 = t12r[j]
                 t22 = t22r[j]
-                px, py = _project(pxr[j] + t11 * gx + t12 * gy,
-                                  pyr[j] + t12 * gx + t22 * gy, gr[j])
+                hb = _F1 / (_F1 + se / gr[j])
+                px, py = _project((pxr[j] + t11 * gx + t12 * gy) * hb,
+                                  (pyr[j] + t12 * gx + t22 * gy) * hb, gr[j])
                 pxr[j] = px
                 pyr[j] = py
                 tpxr[j] = t11 * px + t12 * py
@@ -324,7 +352,8 @@ def _dual_row(u, p, tp, g, tens, i, step, aniso):
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def tvl1_iterations(
-    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks
+    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks,
+    huber=0.0,
 ):
     """Numba TV-L1 iterations at one warp; updates ``u``, ``p``, ``tp``, ``q`` in place.
 
@@ -361,6 +390,8 @@ def tvl1_iterations(
         Use the tensor (tensor-directed TV ``Σ |T ∇u_k|``).
     blocks : (n+1,) int64
         Row-block bounds from :func:`_row_blocks`.
+    huber : float
+        ε_H of Huber-TV (0: TV).
 
     Returns
     -------
@@ -391,17 +422,18 @@ def tvl1_iterations(
                 err += _primal_row(u, tp, i, 0, d1, theta)
                 err += _primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
-                    _dual_row(u, p, tp, g, tens, i - 1, step, aniso)
+                    _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
             errs[b] = err
         for b in nb.prange(n_blk):
-            _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso)
+            _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
         if errs.sum() / (h * w) < tol2:
             break
     return it
 
 
 def tvl1_iterations_numpy(
-    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks=None
+    ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks=None,
+    huber=0.0,
 ):
     """NumPy reference of :func:`tvl1_iterations` (same arguments and in-place updates).
 
@@ -425,7 +457,8 @@ def tvl1_iterations_numpy(
             grad = gradient(u[k])
             if aniso:
                 grad = np.einsum("hwab,hwb->hwa", T, grad)
-            pk = project_l2_ball(hw(p[2 * k : 2 * k + 2]) + (tau / theta) * grad, g)
+            pk = prox_huber_conjugate(hw(p[2 * k : 2 * k + 2]) + (tau / theta) * grad,
+                                      tau / theta, huber, g)
             p[2 * k : 2 * k + 2] = np.moveaxis(pk, -1, 0)
             if aniso:
                 tp[2 * k : 2 * k + 2] = np.moveaxis(np.einsum("hwab,hwb->hwa", T, pk), -1, 0)
@@ -668,9 +701,9 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
         params.max_iterations, np.float32(params.tolerance), params.data_sweeps, aniso,
     )
     if engine == "numba":
-        n = tvl1_iterations(*args, _row_blocks(I0.shape[0]))
+        n = tvl1_iterations(*args, _row_blocks(I0.shape[0]), np.float32(params.huber))
     else:
-        n = tvl1_iterations_numpy(*args)
+        n = tvl1_iterations_numpy(*args, None, params.huber)
     if q is not state["q"]:
         state["q"][...] = q[:nc]
         state["q_extra"] = np.ascontiguousarray(q[nc:])
