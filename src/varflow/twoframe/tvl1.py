@@ -613,7 +613,8 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     the weight γ.  ``∇J0`` is computed once per level and kept in ``state["grad0"]``.
     With ζ > 0 every channel is then divided by ``sqrt(|∇ρ|² + ζ²)``, ``∇ρ`` the
     unweighted gradient of its constraint (Zimmer et al. 2011).  With γ = ζ = 0 this
-    is exactly :func:`linearise`.
+    is exactly :func:`linearise`.  Numba kernels; :func:`data_channels_numpy` is the
+    reference.
 
     Parameters
     ----------
@@ -629,7 +630,134 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
         ``K = C`` without the gradient term, else ``3 C`` (colour channels, then
         the x and then the y gradient channels).
     """
-    ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
+    if not robust_data_term(params):
+        return linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
+    h, w, nc = I0.shape
+    n_k = 3 * nc if params.gradient_weight > 0 else nc
+    ix = np.empty((n_k, h, w), np.float32)
+    iy = np.empty_like(ix)
+    a = np.empty_like(ix)
+    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy, flow0)]
+    inside = np.asarray(inside, np.bool_)
+    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], inside, f32[4], ix[:nc], iy[:nc], a[:nc])
+    w_grad = np.float32(params.gradient_weight / params.data_weight)
+    if params.gradient_weight > 0:
+        sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
+        if "grad0" not in state:
+            state["grad0"] = image_derivatives(_smooth(I0, sigma))
+        i0x, i0y = state["grad0"]
+        j1 = _smooth_fast(np.concatenate([f32[2], f32[3]], axis=2), sigma)
+        _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, ix, iy, a)
+    if params.data_normalisation > 0:
+        wts = np.ones((n_k, 1, 1), np.float32)
+        wts[nc:] = w_grad
+        zeta2 = np.float32(params.data_normalisation) ** 2
+        scale = np.float32(1) / np.sqrt((ix * ix + iy * iy) / (wts * wts) + zeta2)
+        ix *= scale
+        iy *= scale
+        a *= scale
+    return ix, iy, a
+
+
+def _gaussian_taps(sigma: float) -> np.ndarray:
+    """The 1-D taps of ``scipy.ndimage.gaussian_filter`` (truncate 4)."""
+    r = int(4.0 * sigma + 0.5)
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    k = np.exp(-0.5 * x * x / (sigma * sigma))
+    return (k / k.sum()).astype(np.float32)
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _smooth_kernel(x, taps, out):
+    """Separable smoothing of the rows and columns of (H, W, K), edges replicated."""
+    h, w, k = x.shape
+    r = taps.shape[0] // 2
+    tmp = np.empty_like(x)
+    for i in nb.prange(h):
+        for j in range(w):
+            for c in range(k):
+                acc = np.float32(0.0)
+                for t in range(-r, r + 1):
+                    jj = min(max(j + t, 0), w - 1)
+                    acc += taps[t + r] * x[i, jj, c]
+                tmp[i, j, c] = acc
+    for i in nb.prange(h):
+        for j in range(w):
+            for c in range(k):
+                out[i, j, c] = 0.0
+        for t in range(-r, r + 1):
+            ii = min(max(i + t, 0), h - 1)
+            wt = taps[t + r]
+            for j in range(w):
+                for c in range(k):
+                    out[i, j, c] += wt * tmp[ii, j, c]
+
+
+def _smooth_fast(x: np.ndarray, sigma: float) -> np.ndarray:
+    """:func:`_smooth` as a Numba kernel (same taps and edge handling)."""
+    if sigma <= 0:
+        return np.ascontiguousarray(x, np.float32)
+    x = np.ascontiguousarray(x, np.float32)
+    out = np.empty_like(x)
+    _smooth_kernel(x, _gaussian_taps(sigma), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, ix, iy, a):
+    """Gradient-constancy channels ``C..3C`` of :func:`data_channels` in one pass.
+
+    ``j1`` (H, W, 2C): the smoothed warped derivatives ``[∂x J1w, ∂y J1w]``; their
+    5-point derivatives give the (symmetrised) Hessian.
+    """
+    h, w, nc = i0x.shape
+    c1 = np.float32(1.0 / 12.0)
+    half = np.float32(0.5)
+    for i in nb.prange(h):
+        im2 = max(i - 2, 0)
+        im1 = max(i - 1, 0)
+        ip1 = min(i + 1, h - 1)
+        ip2 = min(i + 2, h - 1)
+        for j in range(w):
+            if not inside[i, j]:
+                for c in range(nc, 3 * nc):
+                    ix[c, i, j] = 0.0
+                    iy[c, i, j] = 0.0
+                    a[c, i, j] = 0.0
+                continue
+            jm2 = max(j - 2, 0)
+            jm1 = max(j - 1, 0)
+            jp1 = min(j + 1, w - 1)
+            jp2 = min(j + 2, w - 1)
+            u0 = flow0[i, j, 0]
+            v0 = flow0[i, j, 1]
+            for c in range(nc):
+                cx = c
+                cy = nc + c
+                hxx = (j1[i, jm2, cx] - 8 * j1[i, jm1, cx] + 8 * j1[i, jp1, cx]
+                       - j1[i, jp2, cx]) * c1
+                hxy1 = (j1[im2, j, cx] - 8 * j1[im1, j, cx] + 8 * j1[ip1, j, cx]
+                        - j1[ip2, j, cx]) * c1
+                hyx = (j1[i, jm2, cy] - 8 * j1[i, jm1, cy] + 8 * j1[i, jp1, cy]
+                       - j1[i, jp2, cy]) * c1
+                hyy = (j1[im2, j, cy] - 8 * j1[im1, j, cy] + 8 * j1[ip1, j, cy]
+                       - j1[ip2, j, cy]) * c1
+                hxy = half * (hxy1 + hyx)
+                kx = nc + c
+                ky = 2 * nc + c
+                ix[kx, i, j] = wg * hxx
+                iy[kx, i, j] = wg * hxy
+                a[kx, i, j] = wg * (j1[i, j, cx] - i0x[i, j, c] - hxx * u0 - hxy * v0)
+                ix[ky, i, j] = wg * hxy
+                iy[ky, i, j] = wg * hyy
+                a[ky, i, j] = wg * (j1[i, j, cy] - i0y[i, j, c] - hxy * u0 - hyy * v0)
+
+
+def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
+                        state: dict):
+    """Reference NumPy implementation of :func:`data_channels` (same arguments, same
+    state cache, same outputs)."""
+    ix, iy, a = linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
     if not robust_data_term(params):
         return ix, iy, a
     nc = I0.shape[2]
@@ -644,7 +772,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
         hxx, hxy = image_derivatives(j1x)
         hyx, hyy = image_derivatives(j1y)
         hxy = np.float32(0.5) * (hxy + hyx)
-        gx, gy, ga = linearise(np.concatenate([i0x, i0y], 2), np.concatenate([j1x, j1y], 2),
+        gx, gy, ga = linearise_numpy(np.concatenate([i0x, i0y], 2), np.concatenate([j1x, j1y], 2),
                                np.concatenate([hxx, hxy], 2), np.concatenate([hxy, hyy], 2),
                                inside, flow0)
         ix = np.concatenate([ix, w_grad * gx])
