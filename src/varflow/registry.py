@@ -60,6 +60,12 @@ METHODS: dict[str, Method] = {
         solve_warp=_tvl1.solve_warp,
         description="TV-L1 (colour L1 data term, edge-weighted TV, ROF texture, median)",
     ),
+    "tvl1-fast": Method(
+        name="tvl1-fast",
+        params=_tvl1.TVL1FastParams,
+        solve_warp=_tvl1.solve_warp,
+        description="TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
+    ),
     "tensor": Method(
         name="tensor",
         params=_tensor.TensorParams,

@@ -122,7 +122,7 @@ from ..twoframe.tvl1 import (
     _row_blocks,
     edge_weight,
     linearise,
-    require_colour_term,
+    require_plain_tvl1,
 )
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
@@ -295,7 +295,7 @@ class MultiFrameParams(TVL1Params):
                f"must be >= 1, got {self.propagate_levels}")
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
-        require_colour_term(self, "the multi-frame U-step")  # not in the U-step yet
+        require_plain_tvl1(self, "the multi-frame U-step")  # not in the U-step yet
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",

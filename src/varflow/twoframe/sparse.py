@@ -78,7 +78,7 @@ from .tvl1 import (
     kernel_tensor,
     linearise,
     planar,
-    require_colour_term,
+    require_plain_tvl1,
     run_warp,
 )
 
@@ -223,7 +223,7 @@ class SparseParams(TensorParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        require_colour_term(self, "the sparse stage")  # not in the sparse stage yet
+        require_plain_tvl1(self, "the sparse stage")  # not in the sparse stage yet
         _check(self.regulariser in ("tv", "tensor"), "regulariser",
                f"must be 'tv' or 'tensor', got {self.regulariser!r}")
         _check(self.dictionary in ("mod", "dct"), "dictionary",
