@@ -91,20 +91,21 @@ def derivative_planes_numpy(image: np.ndarray) -> np.ndarray:
     return np.concatenate([img, *image_derivatives(img)], axis=2)
 
 
+@nb.njit(cache=True, inline="always")
+def stencil5_indices(i, n):
+    """Indices ``i-2, i-1, i+1, i+2`` clamped to ``[0, n-1]`` (edge replication) for the
+    5-point stencil of :func:`image_derivatives` in Numba kernels."""
+    return max(i - 2, 0), max(i - 1, 0), min(i + 1, n - 1), min(i + 2, n - 1)
+
+
 @nb.njit(cache=True, parallel=True, fastmath=True)
 def _derivative_planes_kernel(img, out):
     h, w, nc = img.shape
     c1 = np.float32(1.0 / 12.0)
     for i in nb.prange(h):
-        im2 = max(i - 2, 0)
-        im1 = max(i - 1, 0)
-        ip1 = min(i + 1, h - 1)
-        ip2 = min(i + 2, h - 1)
+        im2, im1, ip1, ip2 = stencil5_indices(i, h)
         for j in range(w):
-            jm2 = max(j - 2, 0)
-            jm1 = max(j - 1, 0)
-            jp1 = min(j + 1, w - 1)
-            jp2 = min(j + 2, w - 1)
+            jm2, jm1, jp1, jp2 = stencil5_indices(j, w)
             for c in range(nc):
                 out[i, j, c] = img[i, j, c]
                 out[i, j, nc + c] = (img[i, jm2, c] - 8 * img[i, jm1, c]

@@ -48,7 +48,7 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
-from ..ops.differences import divergence, gradient, image_derivatives
+from ..ops.differences import divergence, gradient, image_derivatives, stencil5_indices
 from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
@@ -660,10 +660,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     _linearise_kernel(f32[0], f32[1], f32[2], f32[3], inside, f32[4], ix[:nc], iy[:nc], a[:nc])
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
-        sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
-        if "grad0" not in state:
-            state["grad0"] = image_derivatives(_smooth(I0, sigma))
-        i0x, i0y = state["grad0"]
+        sigma, (i0x, i0y) = _reference_gradients(I0, params, state)
         j1 = _smooth_fast(np.concatenate([f32[2], f32[3]], axis=2), sigma)
         _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, ix, iy, a)
     if params.data_normalisation > 0:
@@ -675,6 +672,14 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
         iy *= scale
         a *= scale
     return ix, iy, a
+
+
+def _reference_gradients(I0, params: TVL1Params, state: dict):
+    """``(σ, (∂x J0, ∂y J0))`` of the level, ``J0 = G_σ * I0``, cached in ``state["grad0"]``."""
+    sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
+    if "grad0" not in state:
+        state["grad0"] = image_derivatives(_smooth(I0, sigma))
+    return sigma, state["grad0"]
 
 
 def _gaussian_taps(sigma: float) -> np.ndarray:
@@ -732,10 +737,7 @@ def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, ix, iy, a):
     c1 = np.float32(1.0 / 12.0)
     half = np.float32(0.5)
     for i in nb.prange(h):
-        im2 = max(i - 2, 0)
-        im1 = max(i - 1, 0)
-        ip1 = min(i + 1, h - 1)
-        ip2 = min(i + 2, h - 1)
+        im2, im1, ip1, ip2 = stencil5_indices(i, h)
         for j in range(w):
             if not inside[i, j]:
                 for c in range(nc, 3 * nc):
@@ -743,10 +745,7 @@ def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, ix, iy, a):
                     iy[c, i, j] = 0.0
                     a[c, i, j] = 0.0
                 continue
-            jm2 = max(j - 2, 0)
-            jm1 = max(j - 1, 0)
-            jp1 = min(j + 1, w - 1)
-            jp2 = min(j + 2, w - 1)
+            jm2, jm1, jp1, jp2 = stencil5_indices(j, w)
             u0 = flow0[i, j, 0]
             v0 = flow0[i, j, 1]
             for c in range(nc):
@@ -781,10 +780,7 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
     nc = I0.shape[2]
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
-        sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
-        if "grad0" not in state:
-            state["grad0"] = image_derivatives(_smooth(I0, sigma))
-        i0x, i0y = state["grad0"]
+        sigma, (i0x, i0y) = _reference_gradients(I0, params, state)
         j1x = _smooth(I1w_dx, sigma)
         j1y = _smooth(I1w_dy, sigma)
         hxx, hxy = image_derivatives(j1x)
