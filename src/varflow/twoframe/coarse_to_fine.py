@@ -31,6 +31,7 @@ from ..ops.differences import derivative_planes
 from ..ops.median import median_filter_flow
 from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_flow
 from ..ops.rof import structure_texture
+from ..ops.sharpness import match_sharpness
 from ..ops.warp import warp_bicubic
 
 __all__ = [
@@ -85,6 +86,12 @@ class CoarseToFineParams:
     pyramid_sigma : float
         Anti-alias smoothing: σ = pyramid_sigma · sqrt(η^(-2l) − 1) at level l.
         Default 0.6.
+    sharpness_match : bool
+        Before anything else, blur the sharper frame by a Gaussian until both frames
+        are equally sharp when their sharpness (mean |∇I|² / var I) differs by more
+        than :data:`varflow.ops.sharpness.SHARPNESS_TOLERANCE` in log units (one frame
+        motion-blurred or out of focus); pairs of equal sharpness are untouched.
+        Two-frame methods only (:func:`coarse_to_fine`).  Default False.
     """
 
     scale_factor: float = 0.8
@@ -97,6 +104,7 @@ class CoarseToFineParams:
     rof_theta: float = 0.125
     rof_iterations: int = 50
     pyramid_sigma: float = 0.6
+    sharpness_match: bool = False
 
     def __post_init__(self) -> None:
         _check(
@@ -210,7 +218,8 @@ def coarse_to_fine(
         ``callback(done, total)`` after each warp.
     stats : dict, optional
         Filled with counters and per-stage seconds: ``levels``, ``warps``,
-        ``seconds`` and whatever the solver records (it sees the same dict as
+        ``seconds``, ``blur_sigma`` (with ``sharpness_match``: the σ of the
+        Gaussian applied to each frame) and whatever the solver records (it sees the same dict as
         ``state["stats"]``, e.g. the sparse method's ``sparse_seconds``).
     levels : int, optional
         Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
@@ -223,6 +232,10 @@ def coarse_to_fine(
     """
     I0, I1 = check_pair(frame0, frame1)
     t_start = time.perf_counter()
+    stats = {} if stats is None else stats
+    if params.sharpness_match:
+        I0, I1, sigma0, sigma1 = match_sharpness(I0, I1)
+        stats["blur_sigma"] = (sigma0, sigma1)
     shapes = pyramid_shapes(I0.shape[:2], params.max_levels, params.scale_factor, params.min_size)
     if levels is not None:
         _check(levels >= 1, "levels", f"must be >= 1, got {levels}")
@@ -230,8 +243,7 @@ def coarse_to_fine(
     pyr0 = prepare_pyramid(I0, params, shapes)
     pyr1 = prepare_pyramid(I1, params, shapes)
     flow = coarse_to_fine_pyramids(pyr0, pyr1, solve_warp, params, init_flow, callback, stats)
-    if stats is not None:
-        stats["seconds"] = time.perf_counter() - t_start
+    stats["seconds"] = time.perf_counter() - t_start
     return flow
 
 
