@@ -296,6 +296,9 @@ class MultiFrameParams(TVL1Params):
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
         require_plain_tvl1(self, "the multi-frame U-step")  # not in the U-step yet
+        _check(not self.sharpness_match, "sharpness_match",
+               "must be False here: it matches two frames, the multi-frame methods "
+               "see a whole clip")
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",
