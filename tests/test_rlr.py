@@ -286,7 +286,7 @@ def test_adjacent_link_factor_follows_the_frames_noise():
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
      ("gradient_weight", 40.0), ("data_normalisation", 0.05), ("huber", 0.02),
-     ("sharpness_match", True),
+     ("sharpness_match", True), ("noise_reference", 0.01),
      ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):

@@ -299,6 +299,9 @@ class MultiFrameParams(TVL1Params):
         _check(not self.sharpness_match, "sharpness_match",
                "must be False here: it matches two frames, the multi-frame methods "
                "see a whole clip")
+        _check(self.noise_reference == 0, "noise_reference",
+               "must be 0 here: the multi-frame methods read the noise themselves "
+               f"(adjacent_noise), got {self.noise_reference}")
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",

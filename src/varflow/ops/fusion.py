@@ -52,6 +52,7 @@ __all__ = [
     "fuse",
     "repair",
     "noise_sigma",
+    "noise_sigma_flat",
     "repair_margin",
     "REPAIR_DIRECTIONS",
 ]
@@ -396,6 +397,14 @@ def noise_sigma(image: np.ndarray) -> float:
     J. Immerkær, "Fast noise variance estimation", Computer Vision and Image
     Understanding 64(2), 300–302, 1996.
     """
+    return float(_IMMERKAER * np.mean(_immerkaer_response(image)))
+
+
+_IMMERKAER = math.sqrt(math.pi / 2.0) / 6.0
+
+
+def _immerkaer_response(image: np.ndarray) -> np.ndarray:
+    """``|N * I|`` of :func:`noise_sigma` on the interior, channels averaged: (H-2, W-2)."""
     img = np.asarray(image, np.float32)
     if img.ndim == 2:
         img = img[..., None]
@@ -404,8 +413,40 @@ def noise_sigma(image: np.ndarray) -> float:
     c = img[1:-1, 1:-1]
     edges = img[:-2, 1:-1] + img[2:, 1:-1] + img[1:-1, :-2] + img[1:-1, 2:]
     corners = img[:-2, :-2] + img[:-2, 2:] + img[2:, :-2] + img[2:, 2:]
-    resp = 4.0 * c - 2.0 * edges + corners
-    return float(math.sqrt(math.pi / 2.0) * np.mean(np.abs(resp)) / 6.0)
+    return np.abs(4.0 * c - 2.0 * edges + corners).mean(axis=2)
+
+
+def noise_sigma_flat(image: np.ndarray, block: int = 16, percentile: float = 10.0) -> float:
+    """:func:`noise_sigma` read on the flattest parts of the image.
+
+    The mean response ``|N * I|`` of every ``block × block`` tile is taken, and the
+    ``percentile``-th of those tile means is converted to σ as in
+    :func:`noise_sigma`.  Texture and edges raise the response of their tiles only,
+    so a photograph with flat regions reads its sensor noise rather than its
+    texture: on the Middlebury pairs 0.0015–0.0087, on photographic pairs with
+    added noise of σ 0.015–0.04 about 0.010–0.033 (:func:`noise_sigma` gives
+    0.003–0.024 on the former).
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C), H, W >= 3
+    block : int
+        Tile side, pixels (the tiles that fit; an image smaller than one tile is
+        one tile).
+    percentile : float
+        In [0, 100].
+
+    Returns
+    -------
+    float
+        σ in the units of ``image``.
+    """
+    resp = _immerkaer_response(image)
+    h, w = resp.shape
+    bh, bw = min(block, h), min(block, w)
+    nh, nw = h // bh, w // bw
+    tiles = resp[:nh * bh, :nw * bw].reshape(nh, bh, nw, bw).mean(axis=(1, 3))
+    return float(_IMMERKAER * np.percentile(tiles, percentile))
 
 
 def repair_margin(i0: np.ndarray, i1: np.ndarray, floor: float = 0.005,

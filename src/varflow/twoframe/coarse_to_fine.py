@@ -135,6 +135,15 @@ class CoarseToFineParams:
         """Return a copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
+    def for_frames(self, I0: np.ndarray, I1: np.ndarray, stats: dict) -> CoarseToFineParams:
+        """The parameters to use on this pair of frames (``self`` here).
+
+        Methods whose weights follow the frames (see ``noise_reference`` of
+        :class:`varflow.twoframe.tvl1.TVL1Params`) override it; they may record
+        what they read in ``stats``.
+        """
+        return self
+
     def level_warps(self, shape: tuple[int, int]) -> int:
         """Number of warps at a pyramid level of size ``shape`` (``n_warps`` here).
 
@@ -219,7 +228,8 @@ def coarse_to_fine(
     stats : dict, optional
         Filled with counters and per-stage seconds: ``levels``, ``warps``,
         ``seconds``, ``blur_sigma`` (with ``sharpness_match``: the σ of the
-        Gaussian applied to each frame) and whatever the solver records (it sees the same dict as
+        Gaussian applied to each frame), what the parameters read off the frames
+        (``noise_sigma`` and ``data_scale`` of TV-L1's noise rule) and whatever the solver records (it sees the same dict as
         ``state["stats"]``, e.g. the sparse method's ``sparse_seconds``).
     levels : int, optional
         Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
@@ -233,6 +243,7 @@ def coarse_to_fine(
     I0, I1 = check_pair(frame0, frame1)
     t_start = time.perf_counter()
     stats = {} if stats is None else stats
+    params = params.for_frames(I0, I1, stats)
     if params.sharpness_match:
         I0, I1, sigma0, sigma1 = match_sharpness(I0, I1)
         stats["blur_sigma"] = (sigma0, sigma1)

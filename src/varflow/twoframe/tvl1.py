@@ -49,6 +49,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..ops.differences import divergence, gradient, image_derivatives, stencil5_indices
+from ..ops.fusion import noise_sigma_flat
 from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
@@ -120,6 +121,13 @@ class TVL1Params(CoarseToFineParams):
         pixel): the regulariser is quadratic, ``g |∇u_k|²/(2ε_H)``, below ε_H and TV
         above, so smooth (affine, non-rigid) motion does not staircase.  0 gives TV.
         Default 0.
+    noise_reference : float
+        σ_0 of the noise rule, intensity units: on frames whose noise σ̂ exceeds it
+        the data weights λ and γ are multiplied by σ_0/σ̂ (a stronger
+        regulariser where the data are noisier); σ̂ is the mean over the two frames
+        of :func:`varflow.ops.fusion.noise_sigma_flat` (Immerkær's estimator on the
+        flattest tiles), read before any pre-processing.  0 turns it off.
+        Default 0.
     """
 
     data_weight: float = 40.0
@@ -134,6 +142,7 @@ class TVL1Params(CoarseToFineParams):
     gradient_sigma: float = 1.0
     data_normalisation: float = 0.0
     huber: float = 0.0
+    noise_reference: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -171,6 +180,27 @@ class TVL1Params(CoarseToFineParams):
             "huber",
             f"must be a finite number >= 0, got {self.huber}",
         )
+        _check(
+            math.isfinite(self.noise_reference) and self.noise_reference >= 0,
+            "noise_reference",
+            f"must be a finite number >= 0, got {self.noise_reference}",
+        )
+
+    def for_frames(self, I0: np.ndarray, I1: np.ndarray, stats: dict) -> TVL1Params:
+        """Apply the noise rule (``noise_reference``) to a pair of ``(H, W, C)`` frames.
+
+        Records ``noise_sigma`` (σ̂) and ``data_scale`` (the factor on λ and γ) in
+        ``stats`` when the rule is on.
+        """
+        if self.noise_reference <= 0:
+            return self
+        sigma = 0.5 * (noise_sigma_flat(I0) + noise_sigma_flat(I1))
+        scale = min(1.0, self.noise_reference / sigma) if sigma > 0 else 1.0
+        stats.update(noise_sigma=sigma, data_scale=scale)
+        if scale == 1.0:
+            return self
+        return self.replace(data_weight=self.data_weight * scale,
+                            gradient_weight=self.gradient_weight * scale)
 
 
 @dataclass(frozen=True)
