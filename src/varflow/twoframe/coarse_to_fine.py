@@ -229,8 +229,9 @@ def coarse_to_fine(
         Filled with counters and per-stage seconds: ``levels``, ``warps``,
         ``seconds``, ``blur_sigma`` (with ``sharpness_match``: the σ of the
         Gaussian applied to each frame), what the parameters read off the frames
-        (``noise_sigma`` and ``data_scale`` of TV-L1's noise rule) and whatever the solver records (it sees the same dict as
-        ``state["stats"]``, e.g. the sparse method's ``sparse_seconds``).
+        (``noise_sigma`` and ``data_scale`` of TV-L1's noise rule) and whatever
+        the solver records (it sees the same dict as ``state["stats"]``, e.g. the
+        sparse method's ``sparse_seconds``).
     levels : int, optional
         Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
         default all.
