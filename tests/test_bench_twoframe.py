@@ -212,7 +212,7 @@ def test_runner_on_tiny_photo_pairs(photo_rows):
         assert r["set"] == "photo" and r["split"] == "tuning"
         assert r["kind"] == ("varflow" if r["method"] == "tvl1" else "peer")
         assert math.isfinite(r["aee"]) and math.isfinite(r["aee_noc"])
-        assert 0 < r["seconds"] < 30
+        assert r["seconds"] > 0  # recorded (no bound: the first pair may include the JIT)
         assert r["motion"] == "small" and 0 < r["occluded"] < 0.5
     # the numbers are those of a direct run, scored on all pixels and on the visible ones
     r = next(r for r in photo_rows if r["sequence"] == "objects/1" and r["method"] == "tvl1")
