@@ -160,31 +160,11 @@ class TVL1Params(CoarseToFineParams):
             f"must be in (0, 1], got {self.edge_weight_min}",
         )
         _check(self.data_sweeps >= 1, "data_sweeps", f"must be >= 1, got {self.data_sweeps}")
-        _check(
-            math.isfinite(self.gradient_weight) and self.gradient_weight >= 0,
-            "gradient_weight",
-            f"must be a finite number >= 0, got {self.gradient_weight}",
-        )
-        _check(
-            math.isfinite(self.gradient_sigma) and self.gradient_sigma >= 0,
-            "gradient_sigma",
-            f"must be a finite number >= 0, got {self.gradient_sigma}",
-        )
-        _check(
-            math.isfinite(self.data_normalisation) and self.data_normalisation >= 0,
-            "data_normalisation",
-            f"must be a finite number >= 0, got {self.data_normalisation}",
-        )
-        _check(
-            math.isfinite(self.huber) and self.huber >= 0,
-            "huber",
-            f"must be a finite number >= 0, got {self.huber}",
-        )
-        _check(
-            math.isfinite(self.noise_reference) and self.noise_reference >= 0,
-            "noise_reference",
-            f"must be a finite number >= 0, got {self.noise_reference}",
-        )
+        for name in ("gradient_weight", "gradient_sigma", "data_normalisation", "huber",
+                     "noise_reference"):
+            value = getattr(self, name)
+            _check(math.isfinite(value) and value >= 0, name,
+                   f"must be a finite number >= 0, got {value}")
 
     def for_frames(self, I0: np.ndarray, I1: np.ndarray, stats: dict) -> TVL1Params:
         """Apply the noise rule (``noise_reference``) to a pair of ``(H, W, C)`` frames.
