@@ -136,7 +136,7 @@ def test_invalid_parameter_names_the_field(field):
 def test_every_parameter_has_a_validity_test():
     # the booleans have no invalid value
     assert {f.name for f in dataclasses.fields(TVL1Params)} <= set(_BAD_VALUES) | {
-        "structure_texture", "sharpness_match"
+        "structure_texture", "sharpness_match", "gradient_grey"
     }
 
 

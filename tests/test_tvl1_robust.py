@@ -135,6 +135,8 @@ def test_gradient_sigma_follows_the_pyramid_level():
 @pytest.mark.parametrize("extra", [
     {},
     {"gradient_weight": 30.0},
+    {"gradient_weight": 30.0, "gradient_grey": True},
+    {"gradient_weight": 30.0, "gradient_grey": True, "data_normalisation": 0.05},
     {"gradient_weight": 30.0, "gradient_sigma": 0.0},
     {"gradient_weight": 30.0, "data_normalisation": 0.05, "data_weight": 1.0},
     {"data_normalisation": 0.05, "data_weight": 1.0},
@@ -267,3 +269,22 @@ def test_huber_reaches_the_api():
     assert p.huber == 0.05 and TVL1Params().huber == 0.0
     with pytest.raises(ValueError, match="^huber:"):
         varflow.make_params("tvl1", huber=-1.0)
+
+
+def test_grey_gradient_term_is_two_channels_of_the_channel_mean():
+    f0, f1, gt = synthetic_pair("smooth", shape=(41, 53), magnitude=2.5, channels=3, seed=9)
+    args = warped_inputs(f0, f1, (0.7 * gt).astype(np.float32))
+    grey = TVL1Params(gradient_weight=30.0, gradient_grey=True)
+    ix, iy, a = data_channels(*args, grey, {})
+    assert ix.shape[0] == 3 + 2
+    # the same as the colour term's gradient channels of the mean image, weighted 3x
+    mean = [np.repeat(x.mean(2, keepdims=True), 1, 2) for x in args[:4]]
+    one = data_channels(*mean, *args[4:], TVL1Params(gradient_weight=90.0), {})
+    for got, want in zip((ix, iy, a), one, strict=True):
+        np.testing.assert_allclose(got[3:], want[1:], atol=1e-6)
+    # on a grey image the option changes nothing
+    g = [x[..., :1] for x in args[:4]]
+    for got, want in zip(data_channels(*g, *args[4:], grey, {}),
+                         data_channels(*g, *args[4:], TVL1Params(gradient_weight=30.0), {}),
+                         strict=True):
+        np.testing.assert_array_equal(got, want)
