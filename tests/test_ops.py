@@ -22,7 +22,14 @@ from varflow.ops.prox import (
     prox_linear_l1_exact,
     soft_threshold,
 )
-from varflow.ops.pyramid import build_pyramid, pyramid_shapes, resize_bilinear, resize_flow
+from varflow.ops.pyramid import (
+    build_pyramid,
+    pyramid_shapes,
+    resize_bilinear,
+    resize_flow,
+    smooth_image,
+    smooth_image_fast,
+)
 from varflow.ops.rof import rof_denoise, rof_denoise_numpy, structure_texture
 from varflow.ops.warp import warp_bicubic, warp_bicubic_numpy
 
@@ -199,6 +206,20 @@ def test_rof_engines_agree_and_reduce_tv():
     const = np.full((16, 16, 1), 0.4, np.float32)
     np.testing.assert_allclose(rof_denoise(const, 0.2, 20), const, atol=1e-6)
     np.testing.assert_allclose(structure_texture(const, 0.95), 0.02, atol=1e-6)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.4, 1.0, 2.5])
+def test_smoothing_engines_agree(sigma):
+    img = np.random.default_rng(12).random((23, 31, 4), dtype=np.float32)
+    fast = smooth_image_fast(img, sigma)
+    ref = smooth_image(img, sigma)
+    assert fast.shape == img.shape and fast.dtype == np.float32 and ref.dtype == np.float32
+    np.testing.assert_allclose(fast, ref, atol=2e-6)
+    if sigma == 0:
+        assert ref is img
+        np.testing.assert_array_equal(fast, img)
+    else:  # a smoothing: the variance drops
+        assert fast.var() < 0.9 * img.var()
 
 
 def test_pyramid_shapes_and_resize_flow():

@@ -16,7 +16,14 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["pyramid_shapes", "build_pyramid", "resize_bilinear", "resize_flow"]
+__all__ = [
+    "pyramid_shapes",
+    "build_pyramid",
+    "smooth_image",
+    "smooth_image_fast",
+    "resize_bilinear",
+    "resize_flow",
+]
 
 
 def pyramid_shapes(
@@ -81,6 +88,70 @@ def resize_bilinear(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return out
 
 
+def smooth_image(image: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing of the rows and columns of an ``(H, W, K)`` array, edges replicated.
+
+    ``scipy.ndimage.gaussian_filter`` with σ pixels along both image axes and none
+    across the planes (truncated at 4σ); σ ≤ 0 returns ``image`` itself.  The
+    reference of :func:`smooth_image_fast`.
+
+    Returns
+    -------
+    ndarray, shape (H, W, K), float32
+    """
+    if sigma <= 0:
+        return image
+    return ndimage.gaussian_filter(image, sigma=(sigma, sigma, 0),
+                                   mode="nearest").astype(np.float32, copy=False)
+
+
+def _gaussian_taps(sigma: float) -> np.ndarray:
+    """The 1-D taps of :func:`smooth_image` (``scipy.ndimage.gaussian_filter``, truncate 4)."""
+    r = int(4.0 * sigma + 0.5)
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    k = np.exp(-0.5 * x * x / (sigma * sigma))
+    return (k / k.sum()).astype(np.float32)
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _smooth_kernel(x, taps, out):
+    """Separable smoothing of the rows and columns of (H, W, K), edges replicated."""
+    h, w, k = x.shape
+    r = taps.shape[0] // 2
+    tmp = np.empty_like(x)
+    for i in nb.prange(h):
+        for j in range(w):
+            for c in range(k):
+                acc = np.float32(0.0)
+                for t in range(-r, r + 1):
+                    jj = min(max(j + t, 0), w - 1)
+                    acc += taps[t + r] * x[i, jj, c]
+                tmp[i, j, c] = acc
+    for i in nb.prange(h):
+        for j in range(w):
+            for c in range(k):
+                out[i, j, c] = 0.0
+        for t in range(-r, r + 1):
+            ii = min(max(i + t, 0), h - 1)
+            wt = taps[t + r]
+            for j in range(w):
+                for c in range(k):
+                    out[i, j, c] += wt * tmp[ii, j, c]
+
+
+def smooth_image_fast(image: np.ndarray, sigma: float) -> np.ndarray:
+    """:func:`smooth_image` as a Numba kernel (same taps and edge handling, float32 sums).
+
+    σ ≤ 0 returns a C-contiguous float32 view or copy of ``image``.
+    """
+    x = np.ascontiguousarray(image, np.float32)
+    if sigma <= 0:
+        return x
+    out = np.empty_like(x)
+    _smooth_kernel(x, _gaussian_taps(sigma), out)
+    return out
+
+
 def build_pyramid(
     image: np.ndarray, shapes: list[tuple[int, int]], factor: float, sigma_scale: float = 0.6
 ) -> list[np.ndarray]:
@@ -94,8 +165,7 @@ def build_pyramid(
         prev = levels[-1]
         ratio = min(shp[0] / prev.shape[0], shp[1] / prev.shape[1])
         sigma = sigma_scale * math.sqrt(max(ratio**-2 - 1.0, 0.0))
-        smooth = ndimage.gaussian_filter(prev, sigma=(sigma, sigma, 0), mode="nearest")
-        levels.append(resize_bilinear(smooth, shp))
+        levels.append(resize_bilinear(smooth_image(prev, sigma), shp))
     return levels
 
 

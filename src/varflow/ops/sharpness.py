@@ -26,9 +26,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
 from .differences import image_derivatives
+from .pyramid import smooth_image
 
 __all__ = ["SHARPNESS_TOLERANCE", "sharpness", "match_sharpness"]
 
@@ -57,10 +57,6 @@ def sharpness(image: np.ndarray) -> float:
     return float((dx * dx + dy * dy).mean()) / var
 
 
-def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
-    return ndimage.gaussian_filter(image, (sigma, sigma, 0), mode="nearest").astype(np.float32)
-
-
 def match_sharpness(frame0: np.ndarray, frame1: np.ndarray,
                     tolerance: float = SHARPNESS_TOLERANCE
                     ) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -87,11 +83,11 @@ def match_sharpness(frame0: np.ndarray, frame1: np.ndarray,
     lo, hi = 0.0, _MAX_SIGMA
     for _ in range(_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        if sharpness(_blur(sharp, mid)) > target:
+        if sharpness(smooth_image(sharp, mid)) > target:
             lo = mid
         else:
             hi = mid
     sigma = 0.5 * (lo + hi)
     if s1 > s0:
-        return frame0, _blur(frame1, sigma), 0.0, sigma
-    return _blur(frame0, sigma), frame1, sigma, 0.0
+        return frame0, smooth_image(frame1, sigma), 0.0, sigma
+    return smooth_image(frame0, sigma), frame1, sigma, 0.0

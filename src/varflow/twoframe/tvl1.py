@@ -46,12 +46,11 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-from scipy import ndimage
 
 from ..ops.differences import divergence, gradient, image_derivatives, stencil5_indices
 from ..ops.fusion import noise_sigma_flat
 from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
-from ..ops.pyramid import resize_bilinear
+from ..ops.pyramid import resize_bilinear, smooth_image, smooth_image_fast
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
 
 __all__ = [
@@ -625,13 +624,6 @@ def require_plain_tvl1(params: TVL1Params, stage: str) -> None:
                f"{getattr(params, name)}")
 
 
-def _smooth(x: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing of the rows and columns of an ``(H, W, K)`` array (σ in pixels)."""
-    if sigma <= 0:
-        return x
-    return ndimage.gaussian_filter(x, sigma=(sigma, sigma, 0), mode="nearest").astype(np.float32)
-
-
 def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict):
     """All channels of the linearised data term of one warp, weights folded in.
 
@@ -678,7 +670,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     if params.gradient_weight > 0:
         g0, gdx, gdy, w_grad = _gradient_inputs(f32[0], f32[2], f32[3], params)
         sigma, (i0x, i0y) = _reference_gradients(g0, params, state)
-        j1 = _smooth_fast(np.concatenate([gdx, gdy], axis=2), sigma)
+        j1 = smooth_image_fast(np.concatenate([gdx, gdy], axis=2), sigma)
         _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, nc, ix, iy, a)
     if params.data_normalisation > 0:
         wts = np.ones((n_k, 1, 1), np.float32)
@@ -716,52 +708,8 @@ def _reference_gradients(I0, params: TVL1Params, state: dict):
     """``(σ, (∂x J0, ∂y J0))`` of the level, ``J0 = G_σ * I0``, cached in ``state["grad0"]``."""
     sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
     if "grad0" not in state:
-        state["grad0"] = image_derivatives(_smooth(I0, sigma))
+        state["grad0"] = image_derivatives(smooth_image(I0, sigma))
     return sigma, state["grad0"]
-
-
-def _gaussian_taps(sigma: float) -> np.ndarray:
-    """The 1-D taps of ``scipy.ndimage.gaussian_filter`` (truncate 4)."""
-    r = int(4.0 * sigma + 0.5)
-    x = np.arange(-r, r + 1, dtype=np.float64)
-    k = np.exp(-0.5 * x * x / (sigma * sigma))
-    return (k / k.sum()).astype(np.float32)
-
-
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def _smooth_kernel(x, taps, out):
-    """Separable smoothing of the rows and columns of (H, W, K), edges replicated."""
-    h, w, k = x.shape
-    r = taps.shape[0] // 2
-    tmp = np.empty_like(x)
-    for i in nb.prange(h):
-        for j in range(w):
-            for c in range(k):
-                acc = np.float32(0.0)
-                for t in range(-r, r + 1):
-                    jj = min(max(j + t, 0), w - 1)
-                    acc += taps[t + r] * x[i, jj, c]
-                tmp[i, j, c] = acc
-    for i in nb.prange(h):
-        for j in range(w):
-            for c in range(k):
-                out[i, j, c] = 0.0
-        for t in range(-r, r + 1):
-            ii = min(max(i + t, 0), h - 1)
-            wt = taps[t + r]
-            for j in range(w):
-                for c in range(k):
-                    out[i, j, c] += wt * tmp[ii, j, c]
-
-
-def _smooth_fast(x: np.ndarray, sigma: float) -> np.ndarray:
-    """:func:`_smooth` as a Numba kernel (same taps and edge handling)."""
-    if sigma <= 0:
-        return np.ascontiguousarray(x, np.float32)
-    x = np.ascontiguousarray(x, np.float32)
-    out = np.empty_like(x)
-    _smooth_kernel(x, _gaussian_taps(sigma), out)
-    return out
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
@@ -821,8 +769,8 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
     if params.gradient_weight > 0:
         g0, gdx, gdy, w_grad = _gradient_inputs(I0, I1w_dx, I1w_dy, params)
         sigma, (i0x, i0y) = _reference_gradients(g0, params, state)
-        j1x = _smooth(gdx, sigma)
-        j1y = _smooth(gdy, sigma)
+        j1x = smooth_image(gdx, sigma)
+        j1y = smooth_image(gdy, sigma)
         hxx, hxy = image_derivatives(j1x)
         hyx, hyy = image_derivatives(j1y)
         hxy = np.float32(0.5) * (hxy + hyx)
