@@ -98,20 +98,29 @@ def stencil5_indices(i, n):
     return max(i - 2, 0), max(i - 1, 0), min(i + 1, n - 1), min(i + 2, n - 1)
 
 
+_C12 = np.float32(1.0 / 12.0)
+
+
+@nb.njit(cache=True, inline="always")
+def stencil5(m2, m1, p1, p2):
+    """The 5-point derivative ``(f(-2) - 8 f(-1) + 8 f(1) - f(2)) / 12`` of
+    :func:`image_derivatives`, from the samples at the :func:`stencil5_indices`."""
+    return (m2 - 8 * m1 + 8 * p1 - p2) * _C12
+
+
 @nb.njit(cache=True, parallel=True, fastmath=True)
 def _derivative_planes_kernel(img, out):
     h, w, nc = img.shape
-    c1 = np.float32(1.0 / 12.0)
     for i in nb.prange(h):
         im2, im1, ip1, ip2 = stencil5_indices(i, h)
         for j in range(w):
             jm2, jm1, jp1, jp2 = stencil5_indices(j, w)
             for c in range(nc):
                 out[i, j, c] = img[i, j, c]
-                out[i, j, nc + c] = (img[i, jm2, c] - 8 * img[i, jm1, c]
-                                     + 8 * img[i, jp1, c] - img[i, jp2, c]) * c1
-                out[i, j, 2 * nc + c] = (img[im2, j, c] - 8 * img[im1, j, c]
-                                         + 8 * img[ip1, j, c] - img[ip2, j, c]) * c1
+                out[i, j, nc + c] = stencil5(img[i, jm2, c], img[i, jm1, c], img[i, jp1, c],
+                                             img[i, jp2, c])
+                out[i, j, 2 * nc + c] = stencil5(img[im2, j, c], img[im1, j, c],
+                                                 img[ip1, j, c], img[ip2, j, c])
 
 
 def derivative_planes(image: np.ndarray) -> np.ndarray:

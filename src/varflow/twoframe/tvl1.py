@@ -47,7 +47,13 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from ..ops.differences import divergence, gradient, image_derivatives, stencil5_indices
+from ..ops.differences import (
+    divergence,
+    gradient,
+    image_derivatives,
+    stencil5,
+    stencil5_indices,
+)
 from ..ops.fusion import noise_sigma_flat
 from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear, smooth_image, smooth_image_fast
@@ -721,7 +727,6 @@ def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, k0, ix, iy, a):
     (symmetrised) Hessian.
     """
     h, w, nc = i0x.shape
-    c1 = np.float32(1.0 / 12.0)
     half = np.float32(0.5)
     for i in nb.prange(h):
         im2, im1, ip1, ip2 = stencil5_indices(i, h)
@@ -738,14 +743,10 @@ def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, k0, ix, iy, a):
             for c in range(nc):
                 cx = c
                 cy = nc + c
-                hxx = (j1[i, jm2, cx] - 8 * j1[i, jm1, cx] + 8 * j1[i, jp1, cx]
-                       - j1[i, jp2, cx]) * c1
-                hxy1 = (j1[im2, j, cx] - 8 * j1[im1, j, cx] + 8 * j1[ip1, j, cx]
-                        - j1[ip2, j, cx]) * c1
-                hyx = (j1[i, jm2, cy] - 8 * j1[i, jm1, cy] + 8 * j1[i, jp1, cy]
-                       - j1[i, jp2, cy]) * c1
-                hyy = (j1[im2, j, cy] - 8 * j1[im1, j, cy] + 8 * j1[ip1, j, cy]
-                       - j1[ip2, j, cy]) * c1
+                hxx = stencil5(j1[i, jm2, cx], j1[i, jm1, cx], j1[i, jp1, cx], j1[i, jp2, cx])
+                hxy1 = stencil5(j1[im2, j, cx], j1[im1, j, cx], j1[ip1, j, cx], j1[ip2, j, cx])
+                hyx = stencil5(j1[i, jm2, cy], j1[i, jm1, cy], j1[i, jp1, cy], j1[i, jp2, cy])
+                hyy = stencil5(j1[im2, j, cy], j1[im1, j, cy], j1[ip1, j, cy], j1[ip2, j, cy])
                 hxy = half * (hxy1 + hyx)
                 kx = k0 + c
                 ky = k0 + nc + c
