@@ -679,14 +679,23 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
         j1 = smooth_image_fast(np.concatenate([gdx, gdy], axis=2), sigma)
         _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, nc, ix, iy, a)
     if params.data_normalisation > 0:
-        wts = np.ones((n_k, 1, 1), np.float32)
-        wts[nc:] = w_grad
-        zeta2 = np.float32(params.data_normalisation) ** 2
-        scale = np.float32(1) / np.sqrt((ix * ix + iy * iy) / (wts * wts) + zeta2)
+        scale = _normalisation(ix, iy, nc, w_grad, params.data_normalisation)
         ix *= scale
         iy *= scale
         a *= scale
     return ix, iy, a
+
+
+def _normalisation(ix, iy, nc: int, w_grad, zeta: float) -> np.ndarray:
+    """Factor ``1 / sqrt(|∇ρ|² + ζ²)`` of every channel of :func:`data_channels`, (K, H, W).
+
+    ``|∇ρ|`` is that of the unweighted constraint: the channels from ``nc`` on (the
+    gradient term) carry the weight ``w_grad``, undone first.
+    """
+    wts = np.ones((ix.shape[0], 1, 1), np.float32)
+    wts[nc:] = w_grad
+    zeta2 = np.float32(zeta) ** 2
+    return np.float32(1) / np.sqrt((ix * ix + iy * iy) / (wts * wts) + zeta2)
 
 
 def _gradient_channels(params: TVL1Params, nc: int) -> int:
@@ -782,11 +791,7 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
         iy = np.concatenate([iy, w_grad * gy])
         a = np.concatenate([a, w_grad * ga])
     if params.data_normalisation > 0:
-        # |∇ρ| of the unweighted constraint: undo the channel weight first
-        wts = np.ones((ix.shape[0], 1, 1), np.float32)
-        wts[nc:] = w_grad
-        zeta2 = np.float32(params.data_normalisation) ** 2
-        scale = np.float32(1) / np.sqrt((ix * ix + iy * iy) / (wts * wts) + zeta2)
+        scale = _normalisation(ix, iy, nc, w_grad, params.data_normalisation)
         ix, iy, a = ix * scale, iy * scale, a * scale
     return (np.ascontiguousarray(ix, np.float32), np.ascontiguousarray(iy, np.float32),
             np.ascontiguousarray(a, np.float32))
