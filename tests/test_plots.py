@@ -237,7 +237,8 @@ def test_displacement_panels_labels_and_shared_radius():
         ((BLANK, np.zeros((F, H, W, 2)), REF), {"colour_by": (0, 0, 300)}, "colour_by"),
         ((BLANK, np.zeros((F, H, W, 2)), REF), {"max_radius": 0.0}, "max_radius"),
         ((np.zeros((H, W + 1)), np.zeros((F, H, W, 2)), REF), {}, "reference_frame"),
-        ((np.full((H, W), 2.0), np.zeros((F, H, W, 2)), REF), {}, "reference_frame"),
+        # floats outside [0, 1] are scaled now (varflow._validate); non-finite is refused
+        ((np.full((H, W), np.nan), np.zeros((F, H, W, 2)), REF), {}, "reference_frame"),
     ],
 )
 def test_draw_trajectories_invalid(args, kwargs, name):

@@ -16,9 +16,17 @@ flow_to_color / draw_trajectories
 endpoint_error / angular_error / rms_endpoint_error / evaluate
     Metrics.
 
-Conventions: images are uint8, uint16 or float in [0, 1], ``(H, W)`` or
-``(H, W, C)``; flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal
-component u and ``[..., 1]`` the vertical component v; unknown flow is NaN.
+Conventions: images are uint8, uint16 or float, ``(H, W)`` or ``(H, W, C)``;
+flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal component u and
+``[..., 1]`` the vertical component v; unknown flow is NaN.
+
+Intensities (:mod:`varflow._validate`): uint8 / uint16 frames are divided by 255 /
+65535; float frames inside [0, 1] are used as they are; float frames of one call
+that go outside [0, 1] are scaled *jointly* (one affine map for all the frames of
+the call) from their common range [min, max] to [0, 1]; a constant frame gives
+zero flow; NaN or inf is an error naming the frame.  Before running, the memory
+the call needs is estimated and compared with the memory available
+(:mod:`varflow._memory`; ``VARFLOW_MEMORY_LIMIT`` overrides the latter).
 """
 
 from __future__ import annotations
@@ -86,7 +94,11 @@ def track(
     Parameters
     ----------
     frames : sequence of ndarray or ndarray, shape (F, H, W) or (F, H, W, C)
-        uint8, uint16 or float in [0, 1]; F >= 2, all of one shape.
+        uint8, uint16 or float; F >= 2, all of one shape.  Float frames inside
+        [0, 1] are used as they are; if any float frame goes outside [0, 1], all
+        the float frames are scaled jointly, with one affine map, from their
+        common range [min, max] to [0, 1] (brightness constancy is kept).  NaN
+        or inf raises a ValueError naming the frame (``"frame 7: ..."``).
     ref : int, optional
         Index of the reference frame (negative counts from the end); the centre
         frame ``F // 2`` by default.
@@ -117,13 +129,19 @@ def track(
     Raises
     ------
     ValueError
-        Unknown method or parameter, invalid value, bad frames or ``ref``.
+        Unknown method or parameter, invalid value, bad frames or ``ref``, or
+        frames too large for the available memory
+        (:class:`varflow._memory.InsufficientMemoryError`, raised before the run).
     """
+    from ._memory import check_memory
     from .multiframe.track import check_frames, default_ref
 
     m = get_tracker(method)
     p = make_track_params(m, params, **overrides)
+    if isinstance(frames, np.ndarray) and frames.ndim in (3, 4):  # before converting
+        check_memory(m.name, frames.shape[1:], frames.shape[0], p)
     arr = check_frames(frames)
+    check_memory(m.name, arr.shape[1:], arr.shape[0], p)
     r = default_ref(arr.shape[0], ref)
     stats: dict = {}
     traj = m.track(arr, r, p, callback, stats=stats)
@@ -154,8 +172,14 @@ def flow(
     Parameters
     ----------
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
-        uint8, uint16, or float in [0, 1].  Colour frames use a vector-valued data
-        term (one residual per channel), not a conversion to grey.
+        uint8 (divided by 255), uint16 (by 65535) or float.  Float frames inside
+        [0, 1] are used as they are; if either goes outside [0, 1], both are
+        scaled jointly, with one affine map, from their common range [min, max]
+        to [0, 1], so the flow does not change under ``a * I + b`` applied to
+        both frames; constant frames give zero flow.  NaN or inf raises a
+        ValueError naming the frame (``"frame1: ..."``).  Colour frames use a
+        vector-valued data term (one residual per channel), not a conversion to
+        grey.
     method : str
         A name from :func:`methods`.
     params : dataclass, optional
@@ -179,10 +203,17 @@ def flow(
     Raises
     ------
     ValueError
-        Unknown method or parameter, invalid parameter value, or bad input arrays.
+        Unknown method or parameter, invalid parameter value, bad input arrays, or
+        frames too large for the available memory
+        (:class:`varflow._memory.InsufficientMemoryError`, raised before the run).
     """
+    from ._memory import check_memory
+
     m = get_method(method)
     p = make_params(m, params, **overrides)
+    shape = np.shape(frame0)
+    if len(shape) in (2, 3):  # anything else is reported by the input checks
+        check_memory(m.name, shape, 2, p)
     return coarse_to_fine(
         frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback, stats=stats
     )

@@ -1,9 +1,11 @@
 """Reading and writing images and flow files.
 
 Images are returned as NumPy arrays with the bit depth of the file: ``uint8`` or
-``uint16``, shape ``(H, W)`` for grey and ``(H, W, 3)`` for colour.  Alpha
-channels are dropped and palettes expanded to RGB.  Most formats are handled by
-Pillow; 16-bit PNGs go through the PNG codec of :mod:`varflow.io.kitti_png`
+``uint16`` (``float32`` for 32-bit floating-point TIFFs), shape ``(H, W)`` for grey
+and ``(H, W, 3)`` for colour.  Alpha channels are dropped and palettes expanded to
+RGB.  Corrupted files raise a one-line :class:`ValueError`; a header declaring a
+size the file cannot hold is refused before anything is allocated.  Most formats
+are handled by Pillow; 16-bit PNGs go through the PNG codec of :mod:`varflow.io.kitti_png`
 because Pillow reduces 16-bit colour PNGs to 8 bits.
 """
 
@@ -13,6 +15,7 @@ import io
 import logging
 import os
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -50,9 +53,11 @@ def _from_pillow(img: Image.Image, path: Path) -> np.ndarray:
         img = img.convert("RGBA" if mode in ("P", "PA") else "RGB").convert("RGB")
     elif mode in _TO_GREY_MODES:
         img = img.convert("L")
-    elif mode not in ("L", "RGB", "I", *_16BIT_MODES):
+    elif mode not in ("L", "RGB", "I", "F", *_16BIT_MODES):
         raise ValueError(f"{path}: unsupported image mode {mode!r}")
     arr = np.array(img)
+    if img.mode == "F":  # 32-bit float (TIFF): kept as it is, range and all
+        return np.ascontiguousarray(arr, dtype=np.float32)
     if img.mode in _16BIT_MODES:
         return arr.astype(np.uint16)
     if img.mode == "I":  # 32-bit integer: accept if it fits 16 bits
@@ -60,6 +65,33 @@ def _from_pillow(img: Image.Image, path: Path) -> np.ndarray:
             raise ValueError(f"{path}: integer image values outside 0..65535")
         return arr.astype(np.uint16)
     return arr.astype(np.uint8, copy=False)
+
+
+#: Largest ratio of decoded pixel bytes to file bytes accepted from a header.  No
+#: lossless or lossy codec Pillow reads gets near it on real data (deflate stops at
+#: about 1032:1, LZW at a few thousand); a header declaring more than this is damaged
+#: or hostile and is refused before Pillow allocates the image.
+_MAX_EXPANSION = 8192
+#: Images below this many decoded bytes are never refused by the expansion test.
+_SMALL_IMAGE_BYTES = 64 * 2**20
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _check_declared_size(img: Image.Image, path: Path, file_size: int) -> None:
+    """Refuse a header whose declared size the file cannot possibly encode."""
+    width, height = img.size
+    if width < 1 or height < 1:
+        raise ValueError(f"{path}: invalid image size {width} x {height}")
+    bands = len(img.getbands())
+    declared = width * height * bands * (2 if img.mode in _16BIT_MODES else 1)
+    if declared > max(_SMALL_IMAGE_BYTES, file_size * _MAX_EXPANSION):
+        raise ValueError(
+            f"{path}: header declares a {width} x {height} {img.mode} image, far more "
+            f"than a {file_size}-byte file can hold (damaged file?)"
+        )
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
@@ -74,33 +106,51 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     ndarray
         ``(H, W)`` for grey images, ``(H, W, 3)`` for colour; ``uint8`` for 8-bit
         files and ``uint16`` for 16-bit files (16-bit PNGs, grey or colour, are
-        decoded at full precision).  RGBA drops alpha, palette images are expanded
-        to RGB, LA drops alpha to L, 1-bit images become ``uint8`` 0/255.
+        decoded at full precision); ``float32`` for 32-bit floating-point grey
+        files (TIFF mode ``F``; any range, NaN kept -- see
+        :mod:`varflow._validate` for how flow scales them).  RGBA drops alpha,
+        palette images are expanded to RGB, LA drops alpha to L, 1-bit images
+        become ``uint8`` 0/255.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the file cannot be decoded as an image or has an unsupported mode.
+        If the file cannot be decoded as an image (unknown format, truncated or
+        corrupted data, a header declaring a size the file cannot hold) or has an
+        unsupported mode.  The message is one line and names the file.
     """
     path = Path(os.fspath(path))
     _require_file(path, "image file")
     with open(path, "rb") as f:
         head = f.read(33)
+        file_size = os.fstat(f.fileno()).st_size
     if _png16_header(head):
         try:
             arr = decode_png16(path.read_bytes(), path)
         except ValueError as exc:
-            raise ValueError(f"cannot read image: {exc}") from exc
+            raise ValueError(f"cannot read image: {_one_line(exc)}") from exc
         arr = arr[..., :3] if arr.shape[2] >= 3 else arr[..., 0]
         return np.ascontiguousarray(arr)
     try:
-        with Image.open(path) as img:
-            img.load()
-            arr = _from_pillow(img, path)
-    except (UnidentifiedImageError, OSError, SyntaxError) as exc:
-        raise ValueError(f"{path}: cannot read image ({exc})") from exc
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as img:
+                _check_declared_size(img, path, file_size)
+                img.load()
+                arr = _from_pillow(img, path)
+    except FileNotFoundError:
+        raise
+    except ValueError as exc:
+        if str(path) in str(exc):  # our own message
+            raise ValueError(_one_line(exc)) from exc
+        raise ValueError(f"{path}: cannot read image ({_one_line(exc)})") from exc
+    except Exception as exc:  # noqa: BLE001 - Pillow decoders fail in many ways on bad bytes
+        reason = _one_line(exc) or type(exc).__name__
+        if not isinstance(exc, UnidentifiedImageError | OSError | SyntaxError):
+            reason = f"{type(exc).__name__}: {reason}"
+        raise ValueError(f"{path}: cannot read image ({reason})") from exc
     logger.debug("read %s: %s %s", path, arr.shape, arr.dtype)
     return arr
 

@@ -36,6 +36,9 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}
 _COLOUR_TYPE = {c: t for t, c in _CHANNELS.items()}
 _ZLIB_LEVEL = 6
+#: Largest expansion of a deflate stream (about 1032:1); a header declaring more
+#: image data than the compressed bytes can hold is refused before inflating.
+_ZLIB_MAX_RATIO = 1032
 _KITTI_OFFSET = 2.0**15
 _KITTI_SCALE = 64.0
 
@@ -203,9 +206,15 @@ def decode_png16(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> np.nd
     bpp = 2 * channels
     stride = width * bpp
     expected = height * (stride + 1)
+    compressed = b"".join(idat)
+    if expected > len(compressed) * _ZLIB_MAX_RATIO + 1024:  # cannot be there: no inflating
+        raise FlowFormatError(
+            f"{path}: PNG image data truncated ({len(compressed)} compressed bytes cannot hold "
+            f"the {expected} bytes of {width} x {height} x {channels} at 16 bits)"
+        )
     decomp = zlib.decompressobj()
     try:
-        raw = decomp.decompress(b"".join(idat), expected + 1)
+        raw = decomp.decompress(compressed, expected + 1)
     except zlib.error as exc:
         raise FlowFormatError(f"{path}: corrupt PNG image data ({exc})") from exc
     if len(raw) != expected or not decomp.eof:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import math
 import numbers
 import os
 import zipfile
@@ -37,7 +38,7 @@ import numpy as np
 
 from ._atomic import atomic_write
 
-__all__ = ["TrajectoryFile", "read_trajectories", "write_trajectories"]
+__all__ = ["TrajectoryFile", "TrajectoryFormatError", "read_trajectories", "write_trajectories"]
 
 logger = logging.getLogger(__name__)
 
@@ -194,12 +195,81 @@ def write_trajectories(
     )
 
 
-def _exc_name(exc: BaseException) -> str:
-    return "zlib.error" if isinstance(exc, zlib.error) else type(exc).__name__
+class TrajectoryFormatError(ValueError):
+    """A trajectory file is corrupted or not in the expected format."""
 
 
-def _bad(path: Path, reason: str) -> ValueError:
-    return ValueError(f"{path}: not a valid varflow trajectory file ({reason})")
+#: Largest expansion of a deflate stream (RFC 1951: 258 bytes per 2-bit code is the
+#: bound in practice, about 1032:1); a member cannot hold more data than this.
+_DEFLATE_MAX_RATIO = 1032
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _bad(path: Path, reason: str) -> TrajectoryFormatError:
+    return TrajectoryFormatError(
+        f"{path}: not a valid varflow trajectory file ({_one_line(reason)})"
+    )
+
+
+def _member_limit(info: zipfile.ZipInfo, file_size: int) -> int:
+    """Upper bound on the bytes a zip member can really decompress to."""
+    stored = min(info.compress_size, file_size)
+    if info.compress_type == zipfile.ZIP_STORED:
+        return min(info.file_size, stored)
+    return min(info.file_size, stored * _DEFLATE_MAX_RATIO + 1024)
+
+
+def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, key: str, path: Path,
+                 file_size: int) -> np.ndarray:
+    """Read one ``.npy`` member; refuse a header whose shape the data cannot hold.
+
+    The shape in an ``.npy`` header is checked against what the member can contain
+    *before* anything is allocated, so that a damaged or hostile header declaring
+    ``10**9 x 10**9`` elements fails at once instead of asking for exabytes.
+    """
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise _bad(path, f"{key!r}: unsupported .npy format version {version}")
+    if dtype.hasobject:
+        raise _bad(path, f"{key!r} holds Python objects (pickled data is not read)")
+    nbytes = math.prod(shape) * dtype.itemsize
+    limit = _member_limit(info, file_size)
+    if nbytes > limit:
+        raise _bad(path, f"{key!r} declares shape {shape} of {dtype} ({nbytes} bytes), "
+                         f"but its archive member can hold at most {limit} bytes")
+    with zf.open(info) as fh:
+        return np.lib.format.read_array(fh, allow_pickle=False)
+
+
+def _read_archive(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of the trajectory keys in the ``.npz`` archive at ``path``."""
+    with open(path, "rb") as f:
+        magic = f.read(len(np.lib.format.MAGIC_PREFIX))
+        file_size = os.fstat(f.fileno()).st_size
+        if magic == np.lib.format.MAGIC_PREFIX:
+            raise _bad(path, "a single .npy array, not an .npz archive")
+        if not zipfile.is_zipfile(f):
+            raise _bad(path, "not a NumPy .npz archive (no zip directory found)")
+        with zipfile.ZipFile(f) as zf:
+            members = {(i.filename[:-4] if i.filename.endswith(".npy") else i.filename): i
+                       for i in zf.infolist()}
+            keys = set(members)
+            missing = sorted({_TRAJ_KEY, _REF_KEY} - keys)
+            if missing:
+                raise _bad(path, f"missing key(s) {missing}; found {sorted(keys)}")
+            extra = sorted(keys - _KNOWN_KEYS)
+            if extra:
+                logger.debug("%s: ignoring unknown keys %s", path, extra)
+            return {key: _read_member(zf, members[key], key, path, file_size)
+                    for key in sorted(_KNOWN_KEYS & keys)}
 
 
 def read_trajectories(path: str | os.PathLike[str]) -> TrajectoryFile:
@@ -221,42 +291,30 @@ def read_trajectories(path: str | os.PathLike[str]) -> TrajectoryFile:
     ------
     FileNotFoundError
         If ``path`` does not exist.
-    ValueError
-        If the file is not a readable NumPy archive (truncated, corrupted, pickled
-        content, a plain ``.npy``) or its content is not a trajectory file (missing
-        keys, wrong shapes or dtypes, ``ref`` out of range, metadata that is not a
-        JSON object).  The message names the file.
+    TrajectoryFormatError
+        A :class:`ValueError`: the file is not a readable NumPy archive (truncated,
+        corrupted at any level, pickled content, a plain ``.npy``, an array header
+        declaring more data than the archive holds) or its content is not a
+        trajectory file (missing keys, wrong shapes or dtypes, ``ref`` out of range,
+        metadata that is not a JSON object).  The one-line message names the file.
+        Nothing larger than the archive can really hold is ever allocated.
     """
     path = Path(os.fspath(path))
     if not path.exists():
         raise FileNotFoundError(2, "trajectory file not found", str(path))
     try:
-        loaded_file = np.load(path, allow_pickle=False)
-    except ValueError as exc:  # not .npy/.npz: NumPy would fall back to unpickling
-        raise _bad(path, f"not a NumPy archive: {exc}") from exc
-    except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-        raise _bad(path, f"{_exc_name(exc)}: {exc}") from exc
-    if not isinstance(loaded_file, np.lib.npyio.NpzFile):
-        raise _bad(path, "a single .npy array, not an .npz archive")
-    try:
-        with loaded_file as npz:
-            keys = set(npz.files)
-            missing = sorted({_TRAJ_KEY, _REF_KEY} - keys)
-            if missing:
-                raise _bad(path, f"missing key(s) {missing}; found {sorted(keys)}")
-            extra = sorted(keys - _KNOWN_KEYS)
-            if extra:
-                logger.debug("%s: ignoring unknown keys %s", path, extra)
-            traj = npz[_TRAJ_KEY]
-            ref_arr = npz[_REF_KEY]
-            vis = npz[_VIS_KEY] if _VIS_KEY in keys else None
-            meta_arr = npz[_META_KEY] if _META_KEY in keys else None
-    except ValueError as exc:
-        if str(path) in str(exc):  # our own message
-            raise
-        raise _bad(path, str(exc)) from exc
-    except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
-        raise _bad(path, f"{_exc_name(exc)}: {exc}") from exc
+        arrays = _read_archive(path)
+    except TrajectoryFormatError:
+        raise
+    except FileNotFoundError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - any failure of zipfile/zlib/NumPy on bad bytes
+        name = "zlib.error" if isinstance(exc, zlib.error) else type(exc).__name__
+        raise _bad(path, f"{name}: {exc}") from exc
+    traj = arrays[_TRAJ_KEY]
+    ref_arr = arrays[_REF_KEY]
+    vis = arrays.get(_VIS_KEY)
+    meta_arr = arrays.get(_META_KEY)
 
     if traj.ndim != 4 or traj.shape[3] != 2 or min(traj.shape[:3]) < 1:
         raise _bad(path, f"'trajectories' has shape {traj.shape}, expected (F, H, W, 2)")
@@ -284,7 +342,7 @@ def read_trajectories(path: str | os.PathLike[str]) -> TrajectoryFile:
             raise _bad(path, f"'metadata' must be a string scalar, got {meta_arr.dtype}")
         try:
             loaded = json.loads(str(meta_arr))
-        except json.JSONDecodeError as exc:
+        except (json.JSONDecodeError, RecursionError) as exc:  # RecursionError: deep nesting
             raise _bad(path, f"'metadata' is not valid JSON ({exc})") from exc
         if not isinstance(loaded, dict):
             raise _bad(path, f"'metadata' is a JSON {type(loaded).__name__}, expected an object")

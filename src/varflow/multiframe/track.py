@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_float_image
+from .._validate import as_float_frames
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import _check
 from ..twoframe.tvl1 import TVL1Params, tvl1
@@ -67,10 +67,13 @@ class ChainTrackParams(TVL1Params):
 def check_frames(frames: Any) -> np.ndarray:
     """Validate a frame sequence and convert it to ``(F, H, W, C)`` float32 in [0, 1].
 
+    Float frames outside [0, 1] are scaled jointly from the common range of all
+    the frames (:func:`varflow._validate.as_float_frames`).
+
     Parameters
     ----------
     frames : sequence of ndarray or ndarray, shape (F, H, W) or (F, H, W, C)
-        uint8, uint16 or float in [0, 1]; all of one shape.
+        uint8, uint16 or float (finite); all of one shape.
 
     Returns
     -------
@@ -92,13 +95,10 @@ def check_frames(frames: Any) -> np.ndarray:
             raise ValueError("frames: expected a sequence of images or an array") from None
     if len(seq) < 2:
         raise ValueError(f"frames: need at least 2 frames, got {len(seq)}")
-    out = [as_float_image(f, f"frames[{i}]") for i, f in enumerate(seq)]
+    out = as_float_frames(seq, [f"frame {i}" for i in range(len(seq))])
     for i, f in enumerate(out):
         if f.shape != out[0].shape:
-            raise ValueError(
-                f"frames[{i}]: shape {f.shape[:2] + f.shape[2:]} differs from frames[0] "
-                f"{out[0].shape}"
-            )
+            raise ValueError(f"frame {i}: shape {f.shape} differs from frame 0 {out[0].shape}")
     return np.stack(out)
 
 

@@ -883,8 +883,8 @@ def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callb
     Parameters
     ----------
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
-        uint8, uint16 or float in [0, 1].  Colour images use the vector-valued data
-        term (one L1 residual per channel).
+        uint8, uint16 or float (see :mod:`varflow._validate`).  Colour images use
+        the vector-valued data term (one L1 residual per channel).
     params : TVL1Params, optional
     init_flow : ndarray, shape (H, W, 2), optional
     callback : callable, optional

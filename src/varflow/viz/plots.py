@@ -165,8 +165,9 @@ def draw_trajectories(
     Parameters
     ----------
     reference_frame : ndarray, shape (H, W) or (H, W, C)
-        ``uint8``, ``uint16`` or float in ``[0, 1]``; colour frames are converted
-        to grey (Rec. 601 luma of the first three channels).
+        ``uint8``, ``uint16`` or float (outside ``[0, 1]`` scaled from its range,
+        see :mod:`varflow._validate`); colour frames are converted to grey (Rec. 601
+        luma of the first three channels).
     traj : ndarray, shape (F, H, W, 2)
         Trajectories relative to the reference frame (see the module docstring);
         NaN, infinite or ``|value| > 1e9`` components mark unknown positions.
