@@ -698,9 +698,11 @@ def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
         raise option(exc) from None
     if "photo" not in sets:
         for name in ("split", "families", "photo_shape"):
+            if name == "split" and "large" in sets:
+                continue
             if getattr(args, name) is not None:
                 flag = "--" + name.replace("_", "-")
-                raise ValueError(f"{flag}: only used by the photo set, which --sets "
+                raise ValueError(f"{flag}: only used by the photo (and large) sets, which --sets "
                                  f"{','.join(sets)} does not include")
     methods = _split_list(args.methods)
     for m in methods:
@@ -726,7 +728,7 @@ def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
           f"visible in frame 1; Sintel: its occlusion mask), s: seconds per pair, JIT "
           f"warm-up excluded; Numba threads {numba_threads}"
           + (f", OpenCV threads {cv_threads}" if peers and cv_threads is not None else "")
-          + (f"; data {root}" if {"middlebury", "sintel"} & set(sets) else "")
+          + (f"; data {root}" if {"middlebury", "sintel", "sintel-large"} & set(sets) else "")
           + _params_note(overrides))
     for p, reason in unavailable.items():
         print(f"peer {p} unavailable: {reason}")
@@ -996,6 +998,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
 
+    from .evaluation.bench_twoframe import DEFAULT_SETS as DEFAULT_SETS_TWOFRAME
     from .evaluation.bench_twoframe import SETS as SETS_TWOFRAME
     from .evaluation.peers import PEERS
     from .generators.photo_pairs import FAMILIES as PAIR_FAMILIES
@@ -1014,10 +1017,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "table per set with means, total seconds and ratios to DeepFlow "
                         "(when it runs, else the first method).  Peers whose library is "
                         "missing are reported as unavailable and skipped.")
-    b.add_argument("--sets", default=",".join(SETS_TWOFRAME), metavar="NAMES",
-                   help=f"comma-separated, from: {','.join(SETS_TWOFRAME)} (default all)")
+    b.add_argument("--sets", default=",".join(DEFAULT_SETS_TWOFRAME), metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(SETS_TWOFRAME)} (default "
+                   f"{','.join(DEFAULT_SETS_TWOFRAME)})")
     b.add_argument("--split", choices=("tuning", "reporting", "both"), default=None,
-                   help="seeds of the photo pairs (default reporting)")
+                   help="seeds of the photo pairs and the large-motion pairs (default "
+                   "reporting)")
     b.add_argument("--families", metavar="NAMES",
                    help=f"photo pair families, comma-separated subset of: "
                    f"{','.join(PAIR_FAMILIES)} (default all)")

@@ -19,6 +19,16 @@ scikit-image TV-L1) on three sets:
     ``large`` motion by its mean ground-truth motion (``large`` above
     :data:`LARGE_MOTION_PX` = 10 px).  The ``invalid`` mask is removed from the
     scored pixels when present.
+``"large"``
+    The large-motion pairs of :func:`varflow.generators.large_pairs.make_large_pair`
+    (photographic objects moving 30-150 px over photographic backgrounds, 384 x
+    512, exact flow and occlusion mask), on the same ``split`` seeds
+    (tuning 0-3, reporting 100-103).
+``"sintel-large"``
+    The MPI-Sintel pairs with a mean motion above 10 px (:data:`SINTEL_LARGE_PAIRS`:
+    market_5 final 2->3 and 9->10, cave_2 clean and final 2->3).
+
+Without ``sets``, :data:`DEFAULT_SETS` (the first three) run.
 
 Every (set, pair, method) is scored by the AEE over all pixels with ground truth
 (``aee``; for the photo pairs also the occluded ones and those that leave the
@@ -44,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from ..generators.large_pairs import large_pair_cases, make_large_pair
 from ..generators.photo_pairs import DEFAULT_SHAPE as PHOTO_SHAPE
 from ..generators.photo_pairs import FAMILIES as PHOTO_FAMILIES
 from ..generators.photo_pairs import SPLITS as PHOTO_SPLITS
@@ -61,6 +72,9 @@ from .peers import PEERS, peer_status
 
 __all__ = [
     "SETS",
+    "DEFAULT_SETS",
+    "SINTEL_LARGE_PAIRS",
+    "large_set",
     "SPLIT_CHOICES",
     "SINTEL_PAIRS",
     "LARGE_MOTION_PX",
@@ -82,7 +96,10 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The sets of :func:`run_twoframe`, in order.
-SETS: tuple[str, ...] = ("photo", "middlebury", "sintel")
+SETS: tuple[str, ...] = ("photo", "middlebury", "sintel", "large", "sintel-large")
+
+#: The sets run when none are named: the small-motion sets.
+DEFAULT_SETS: tuple[str, ...] = ("photo", "middlebury", "sintel")
 
 #: Values of ``split``: one split of the photo pairs or both.
 SPLIT_CHOICES: tuple[str, ...] = ("tuning", "reporting", "both")
@@ -97,6 +114,14 @@ SINTEL_PAIRS: tuple[tuple[str, str, int], ...] = (
     ("cave_2", "final", 2),
     ("market_5", "clean", 2),
     ("market_5", "final", 9),
+)
+
+#: The large-motion MPI-Sintel pairs of the ``"sintel-large"`` set: (clip, pass, N).
+SINTEL_LARGE_PAIRS: tuple[tuple[str, str, int], ...] = (
+    ("market_5", "final", 2),
+    ("market_5", "final", 9),
+    ("cave_2", "clean", 2),
+    ("cave_2", "final", 2),
 )
 
 #: A pair whose mean ground-truth motion exceeds this (px) is marked ``large``.
@@ -161,7 +186,7 @@ def _names(value: str | Sequence[str], what: str) -> list[str]:
 
 
 def check_twoframe_options(
-    sets: str | Sequence[str] = SETS,
+    sets: str | Sequence[str] = DEFAULT_SETS,
     split: str = "reporting",
     families: str | Sequence[str] = PHOTO_FAMILIES,
     photo_shape: tuple[int, int] = PHOTO_SHAPE,
@@ -285,6 +310,25 @@ def photo_set(
                         None, pair.occlusion, split, family, seed)
 
 
+def large_set(splits: Sequence[str] = ("reporting",)) -> Iterator[BenchPair]:
+    """The large-motion pairs of :mod:`varflow.generators.large_pairs`, generated lazily.
+
+    Parameters
+    ----------
+    splits : sequence of {"tuning", "reporting"}
+
+    Returns
+    -------
+    iterator of BenchPair
+        ``occlusion`` = not visible in frame 1 (occluded or leaving the frame).
+    """
+    for split in splits:
+        for family, seed in large_pair_cases(split):
+            pair = make_large_pair(family, seed)
+            yield BenchPair("large", pair.name, pair.frame0, pair.frame1, pair.flow,
+                            None, pair.occlusion, split, family, seed)
+
+
 def middlebury_set(root: str | os.PathLike[str] | None = None) -> Iterator[BenchPair]:
     """The 8 Middlebury pairs frame10 -> frame11 (uint8 RGB; unknown ground truth NaN)."""
     base = data_root(root)
@@ -299,8 +343,11 @@ def _sintel_label(clip: str, pass_: str, frame: int) -> str:
 
 def sintel_pairs_present(
     root: str | os.PathLike[str] | None = None,
+    pairs: Sequence[tuple[str, str, int]] = SINTEL_PAIRS,
 ) -> tuple[list[tuple[str, str, int]], list[tuple[str, str, int]]]:
-    """Split :data:`SINTEL_PAIRS` into those on disk (both frames and the flow) and the rest.
+    """Split ``pairs`` (default :data:`SINTEL_PAIRS`) into those on disk and the rest.
+
+    A pair is on disk when both frames and the flow are.
 
     Returns
     -------
@@ -308,7 +355,7 @@ def sintel_pairs_present(
     """
     tr = data_root(root) / "sintel" / "training"
     present, missing = [], []
-    for clip, pass_, n in SINTEL_PAIRS:
+    for clip, pass_, n in pairs:
         files = [tr / pass_ / clip / f"frame_{n:04d}.png",
                  tr / pass_ / clip / f"frame_{n + 1:04d}.png",
                  tr / "flow" / clip / f"frame_{n:04d}.flo"]
@@ -319,6 +366,7 @@ def sintel_pairs_present(
 def sintel_set(
     root: str | os.PathLike[str] | None = None,
     pairs: Sequence[tuple[str, str, int]] | None = None,
+    set_name: str = "sintel",
 ) -> Iterator[BenchPair]:
     """MPI-Sintel pairs (default: those of :data:`SINTEL_PAIRS` on disk).
 
@@ -330,7 +378,7 @@ def sintel_set(
         pairs = sintel_pairs_present(base)[0]
     for clip, pass_, n in pairs:
         f0, f1, gt, occ, inv = load_sintel_pair(clip, n, pass_, base)
-        yield BenchPair("sintel", _sintel_label(clip, pass_, n), f0, f1, gt,
+        yield BenchPair(set_name, _sintel_label(clip, pass_, n), f0, f1, gt,
                         None if inv is None else ~inv, occ)
 
 
@@ -362,14 +410,19 @@ def check_twoframe_data(
     base = data_root(root)
     if "middlebury" in sets and not (base / "middlebury").is_dir():
         raise FileNotFoundError(f"Middlebury data not found under {base}; {_HINT}")
-    if "sintel" not in sets:
-        return []
-    present, missing = sintel_pairs_present(base)
-    if not present:
-        raise FileNotFoundError(
-            f"none of the Sintel pairs found under {base / 'sintel' / 'training'}; {_HINT}"
-        )
-    return missing
+    missing_all: list[tuple[str, str, int]] = []
+    for name, label, pairs in (("sintel", "Sintel", SINTEL_PAIRS),
+                               ("sintel-large", "large-motion Sintel", SINTEL_LARGE_PAIRS)):
+        if name not in sets:
+            continue
+        present, missing = sintel_pairs_present(base, pairs)
+        if not present:
+            raise FileNotFoundError(
+                f"none of the {label} pairs found under {base / 'sintel' / 'training'}; "
+                f"{_HINT}"
+            )
+        missing_all += [m for m in missing if m not in missing_all]
+    return missing_all
 
 
 # --------------------------------------------------------------------------- running
@@ -417,7 +470,7 @@ def _motion(pair: BenchPair) -> dict[str, Any]:
 def run_twoframe(
     methods: Sequence[str] = ("tvl1",),
     peers: str | Sequence[str] | None = None,
-    sets: str | Sequence[str] = SETS,
+    sets: str | Sequence[str] = DEFAULT_SETS,
     split: str = "reporting",
     families: str | Sequence[str] = PHOTO_FAMILIES,
     root: str | os.PathLike[str] | None = None,
@@ -514,8 +567,13 @@ def run_twoframe(
             sources.append((s, photo_set(splits, fams, photo_shape), n))
         elif s == "middlebury":
             sources.append((s, middlebury_set(root_path), len(MIDDLEBURY_SEQUENCES)))
+        elif s == "large":
+            n = sum(len(large_pair_cases(sp)) for sp in splits)
+            sources.append((s, large_set(splits), n))
         else:
-            sources.append((s, sintel_set(root_path), len(sintel_pairs_present(root_path)[0])))
+            pairs = SINTEL_PAIRS if s == "sintel" else SINTEL_LARGE_PAIRS
+            present = sintel_pairs_present(root_path, pairs)[0]
+            sources.append((s, sintel_set(root_path, present, s), len(present)))
 
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=sum(n for *_, n in sources) * len(runners), desc="two-frame",
@@ -564,6 +622,10 @@ def _group_title(set_name: str, split: str | None, n: int) -> str:
     if set_name == "sintel":
         return (f"MPI-Sintel ({n} pairs; motion large when the mean ground-truth motion "
                 f"> {LARGE_MOTION_PX:g} px)")
+    if set_name == "large":
+        return f"large-motion photo pairs (objects 30-150 px), {split} split ({n} pairs)"
+    if set_name == "sintel-large":
+        return f"MPI-Sintel, large motion ({n} pairs)"
     return f"{set_name} ({n} pairs)"
 
 
@@ -581,7 +643,7 @@ def _one_table(rows: Sequence[Mapping[str, Any]], baseline: str | None) -> str:
         cell[(r["sequence"], r["method"])] = r
     set_name = rows[0]["set"]
     has_noc = any(math.isfinite(_val(r, "aee_noc")) for r in rows)
-    show_class = set_name == "sintel"
+    show_class = set_name in ("sintel", "sintel-large")
 
     def get(s: str, m: str, key: str) -> float:
         return _val(cell.get((s, m)), key)
