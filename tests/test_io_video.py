@@ -1,17 +1,26 @@
-"""Tests of frame-sequence reading (varflow.io.video) and trajectory files
-(varflow.io.trajectories)."""
+"""Tests of frame sequences and video (varflow.io.video, ``varflow video``) and trajectory
+files (varflow.io.trajectories)."""
 
 from __future__ import annotations
 
 import json
-import sys
+from fractions import Fraction
 
 import numpy as np
 import pytest
 
 from varflow.io.images import write_image
 from varflow.io.trajectories import TrajectoryFile, read_trajectories, write_trajectories
-from varflow.io.video import list_frame_files, read_frames
+from varflow.io.video import (
+    VideoInfo,
+    VideoReader,
+    VideoWriter,
+    default_video_codec,
+    list_frame_files,
+    read_frames,
+    video_info,
+    write_video,
+)
 
 
 @pytest.fixture
@@ -188,61 +197,395 @@ def test_bad_source_kinds(sequence, tmp_path):
 
 # --------------------------------------------------------------------------- video
 
+H, W = 48, 64
 
-def _smooth_frames(n, h, w):
-    """RGB frames with smooth, channel-distinct content (JPEG-friendly), moving right."""
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    frames = []
+
+def _index_frames(n: int, h: int = H, w: int = W) -> np.ndarray:
+    """RGB frames that carry their index: 16 bits as a 4x4 grid of dark/bright blocks.
+
+    Channels differ (R full, G 3/4, B 1/2 of the block value) so RGB order is checked.
+    """
+    bh, bw = h // 4, w // 4
+    frames = np.empty((n, h, w, 3), np.uint8)
     for k in range(n):
-        r = 128 + 100 * np.sin((xx - 2 * k) / 9.0)
-        g = 40 + 150 * yy / h
-        b = 200 - 150 * xx / w
-        frames.append(np.stack([r, g, b], axis=-1).round().astype(np.uint8))
-    return np.stack(frames)
+        bits = [(k >> b) & 1 for b in range(16)]
+        level = np.kron(np.array(bits).reshape(4, 4), np.ones((bh, bw)))
+        value = 40 + 180 * level
+        frames[k] = np.stack([value, 0.75 * value, 0.5 * value], axis=-1).round()
+    return frames
 
 
-def _write_avi(path, frames, cv2):
-    h, w = frames.shape[1:3]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (w, h))
-    assert writer.isOpened(), "OpenCV cannot write MJPG/AVI here"
-    for frame in frames:
-        writer.write(np.ascontiguousarray(frame[..., ::-1]))  # RGB -> BGR
-    writer.release()
+def _decode_index(frame: np.ndarray) -> int:
+    """Inverse of :func:`_index_frames` for a (lossy) decoded frame."""
+    h, w = frame.shape[:2]
+    red = frame[..., 0].astype(np.float64)
+    means = red.reshape(4, h // 4, 4, w // 4).mean(axis=(1, 3)).ravel()
+    return int(sum(1 << b for b in range(16) if means[b] > 130))
 
 
-def test_read_video(tmp_path):
-    cv2 = pytest.importorskip("cv2", reason="OpenCV (varflow[bench]) not installed")
-    frames = _smooth_frames(7, 48, 64)
-    path = tmp_path / "clip.avi"
-    _write_avi(path, frames, cv2)
+def _packets(path):
+    """(pts, dts, keyframe) of the video packets in decode order, read with plain PyAV."""
+    import av
+
+    with av.open(str(path)) as container:
+        return [(p.pts, p.dts, p.is_keyframe) for p in container.demux(video=0) if p.size]
+
+
+def _has_encoder(name: str) -> bool:
+    import av
+
+    try:
+        av.codec.Codec(name, "w")
+    except Exception:  # noqa: BLE001
+        return False
+    return True
+
+
+@pytest.mark.parametrize(
+    ("shape", "dtype", "pix_fmt"),
+    [
+        ((H, W, 3), np.uint8, "bgr0"),
+        ((H - 1, W - 1, 3), np.uint8, "bgr0"),  # odd sizes
+        ((H, W), np.uint8, "gray"),
+        ((H - 1, W + 1, 3), np.uint16, "gbrp16le"),
+        ((H, W - 3), np.uint16, "gray16le"),
+    ],
+)
+def test_ffv1_lossless_round_trip(tmp_path, rng, shape, dtype, pix_fmt):
+    top = np.iinfo(dtype).max + 1
+    frames = rng.integers(0, top, size=(7, *shape)).astype(dtype)
+    frames[0].flat[:2] = [0, top - 1]  # extremes survive
+    path = tmp_path / "clip.mkv"
+    assert write_video(path, frames, fps=12.5) == 7
+    info = video_info(path)
+    assert info == VideoInfo(7, 12.5, shape[0], shape[1], 3 if len(shape) == 3 else 1,
+                             np.dtype(dtype), "ffv1", pix_fmt)
+    assert info.frame_shape == shape
     out = read_frames(path)
-    assert out.shape == (7, 48, 64, 3) and out.dtype == np.uint8
-    diff = np.abs(out.astype(np.int64) - frames.astype(np.int64))
-    assert diff.mean() < 10  # lossy MJPG
-    # RGB order: swapping R and B would give a large error on this content.
-    swapped = np.abs(out[..., ::-1].astype(np.int64) - frames.astype(np.int64)).mean()
-    assert swapped > 30
-
-    sub = read_frames(path, start=1, step=2, max_frames=2)
-    assert sub.shape == (2, 48, 64, 3)
-    np.testing.assert_array_equal(sub, out[[1, 3]])
-    np.testing.assert_array_equal(read_frames(path, start=5, stop=100), out[5:])
-
-
-def test_video_errors(tmp_path, monkeypatch):
-    pytest.importorskip("cv2", reason="OpenCV (varflow[bench]) not installed")
-    bad = tmp_path / "broken.avi"
-    bad.write_bytes(b"RIFF....AVI garbage" * 20)
-    with pytest.raises(ValueError, match=r"broken\.avi"):
-        read_frames(bad)
+    assert out.dtype == dtype and out.shape == frames.shape
+    np.testing.assert_array_equal(out, frames)
+    with VideoReader(path) as video:
+        assert len(video) == 7
+        np.testing.assert_array_equal(video.read(4), frames[4])
+        np.testing.assert_array_equal(video.read(-1), frames[6])
+    # an iterable of frames (generator) gives the same file content
+    gen_path = tmp_path / "gen.mkv"
+    write_video(gen_path, (f for f in frames), fps=12.5)
+    np.testing.assert_array_equal(read_frames(gen_path), frames)
 
 
-def test_video_without_opencv(tmp_path, monkeypatch):
-    path = tmp_path / "clip.mp4"
-    path.write_bytes(b"\x00" * 64)
-    monkeypatch.setitem(sys.modules, "cv2", None)  # makes `import cv2` raise ImportError
-    with pytest.raises(ValueError, match=r"varflow\[bench\]"):
-        read_frames(path)
+def _lossy_cases():
+    cases = [("clip.mp4", "mpeg4", {"g": "5", "bf": "2"})]
+    if _has_encoder("libx264"):
+        cases.append(("clip.mp4", "libx264", {"g": "5", "bf": "2"}))
+        cases.append(("clip.mkv", "libx264", {"g": "7", "bf": "3", "x264-params": "open-gop=1"}))
+    cases.append(("clip.avi", "mpeg4", {"g": "4"}))
+    return cases
+
+
+@pytest.mark.parametrize(("name", "codec", "options"), _lossy_cases())
+def test_frame_accurate_seeking_with_b_frames(tmp_path, name, codec, options):
+    n = 23
+    frames = _index_frames(n)
+    path = tmp_path / name
+    write_video(path, frames, fps=25, codec=codec, options=options, quality=4 if
+                codec == "mpeg4" else 20)
+    packets = _packets(path)
+    assert len(packets) == n
+    assert sum(k for _, _, k in packets) >= 4  # several GOPs
+    if "bf" in options:  # B-frames: decode order differs from presentation order
+        pts = [p for p, _, _ in packets]
+        assert pts != sorted(pts)
+
+    info = video_info(path)
+    assert (info.n_frames, info.height, info.width, info.dtype) == (n, H, W, np.uint8)
+    with VideoReader(path) as video:
+        seq = video.read_range(0, None)
+        assert seq.shape == (n, H, W, 3)
+        assert [_decode_index(f) for f in seq] == list(range(n))
+        assert np.abs(seq.astype(int) - frames).mean() < 6
+        order = np.random.default_rng(3).permutation(n).tolist() + [n - 1, 0, n - 1, 5, 5]
+        for i in order:
+            np.testing.assert_array_equal(video.read(i), seq[i], err_msg=f"frame {i}")
+        for start, stop, step in [(0, None, 1), (3, 19, 4), (11, None, 6), (22, 40, 1)]:
+            streamed = list(video.iter_frames(start, stop, step))
+            ranged = video.read_range(start, stop, step)
+            assert len(streamed) == len(ranged) == len(range(n)[start:stop:step])
+            np.testing.assert_array_equal(np.stack(streamed), seq[start:stop:step])
+            np.testing.assert_array_equal(ranged, seq[start:stop:step])
+    np.testing.assert_array_equal(read_frames(path, start=7, stop=13), seq[7:13])
+    np.testing.assert_array_equal(read_frames(path, start=2, step=5, max_frames=3),
+                                  seq[[2, 7, 12]])
+
+
+@pytest.mark.parametrize("codec", ["mpeg4", "libx264"])
+def test_seeking_when_first_pts_is_not_zero(tmp_path, codec):
+    if not _has_encoder(codec):
+        pytest.skip(f"{codec} not in this FFmpeg build")
+    import av
+
+    n, offset = 18, 37
+    frames = _index_frames(n)
+    path = tmp_path / "offset.mkv"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream(codec, rate=25, options={"g": "4", "bf": "2"})
+        stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
+        for k, frame in enumerate(frames):
+            vf = av.VideoFrame.from_ndarray(frame, format="rgb24")
+            vf.pts, vf.time_base = k + offset, Fraction(1, 25)
+            container.mux(stream.encode(vf))
+        container.mux(stream.encode(None))
+    assert min(p for p, _, _ in _packets(path)) > 0
+    with VideoReader(path) as video:
+        assert len(video) == n
+        for i in [n - 1, 9, 0, 4, 13, 1]:
+            assert _decode_index(video.read(i)) == i
+        assert [_decode_index(f) for f in video.iter_frames(5, None, 3)] == [5, 8, 11, 14, 17]
+
+
+def test_default_codecs_and_odd_sizes(tmp_path, rng):
+    frames = _index_frames(6, 48, 64)[:, :47, :63]  # odd size
+    for ext in (".mp4", ".avi", ".mkv", ".webm"):
+        try:
+            codec = default_video_codec(f"x{ext}")
+        except ValueError:
+            continue  # no encoder for .webm in this build
+        path = tmp_path / f"odd{ext}"
+        write_video(path, frames, fps=10)
+        info = video_info(path)
+        assert info.n_frames == 6 and info.fps == 10.0
+        if codec in ("libx264", "libx265"):  # padded to even sizes
+            assert (info.height, info.width) == (48, 64)
+        else:
+            assert (info.height, info.width) == (47, 63)
+        out = read_frames(path)
+        assert out.shape == (6, *info.frame_shape) and out.dtype == np.uint8
+        diff = np.abs(out[:, :47, :63].astype(int) - frames)
+        assert diff.mean() < (1e-9 if codec == "ffv1" else 8), (ext, codec)
+    assert default_video_codec("a.MKV") == "ffv1"
+    with pytest.raises(ValueError, match=r"\.flo"):
+        default_video_codec("a.flo")
+
+
+def test_high_bit_depth_lossy(tmp_path):
+    if not _has_encoder("libx264"):
+        pytest.skip("libx264 not in this FFmpeg build")
+    yy, xx = np.mgrid[0:H, 0:W]
+    frame = np.stack([xx * 1000, yy * 1300, (xx + yy) * 500], axis=-1).astype(np.uint16)
+    path = tmp_path / "deep.mp4"
+    write_video(path, [frame, frame, frame], fps=5)
+    info = video_info(path)
+    assert info.pix_fmt == "yuv420p10le" and info.dtype == np.uint16 and info.channels == 3
+    out = read_frames(path)
+    assert out.dtype == np.uint16 and out.shape == (3, H, W, 3)
+    assert np.abs(out.astype(float) - frame).mean() < 1500  # 10-bit, chroma subsampled
+
+
+def test_write_is_atomic(tmp_path):
+    frames = _index_frames(6)
+    path = tmp_path / "out.mkv"
+
+    def failing(n_ok: int, exc: BaseException):
+        yield from frames[:n_ok]
+        raise exc
+
+    with pytest.raises(RuntimeError, match="camera unplugged"):
+        write_video(path, failing(3, RuntimeError("camera unplugged")))
+    assert list(tmp_path.iterdir()) == []  # no target, no temporary file
+
+    write_video(path, frames[:2], fps=5)
+    before = path.read_bytes()
+    with pytest.raises(KeyboardInterrupt):
+        write_video(path, failing(4, KeyboardInterrupt()))
+    assert path.read_bytes() == before
+    with pytest.raises(ValueError, match="shape"):
+        write_video(path, [frames[0], frames[1][:40]])
+    with pytest.raises(ValueError, match="no frames"):
+        write_video(path, [])
+    assert [p.name for p in tmp_path.iterdir()] == ["out.mkv"]
+    assert path.read_bytes() == before
+
+    # while writing, only a hidden temporary file with the same extension exists
+    with VideoWriter(path, fps=5) as writer:
+        writer.write(frames[0])
+        temps = [p for p in tmp_path.iterdir() if p.name != "out.mkv"]
+        assert len(temps) == 1 and temps[0].name.startswith(".") and temps[0].suffix == ".mkv"
+        writer.write(frames[1])
+        writer.write(frames[2])
+    assert [p.name for p in tmp_path.iterdir()] == ["out.mkv"]
+    assert video_info(path).n_frames == 3
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"path": "x.flo"}, "extension"),
+        ({"fps": 0}, "fps"),
+        ({"fps": float("nan")}, "fps"),
+        ({"codec": "no-such-codec"}, "no-such-codec"),
+        ({"codec": "mpeg4", "pix_fmt": "rgb48le"}, "pix_fmt"),
+        ({"quality": -1}, "quality"),
+    ],
+)
+def test_writer_arguments(tmp_path, kwargs, match):
+    args = {"fps": 25.0, **kwargs}
+    path = tmp_path / args.pop("path", "x.mp4")
+    with pytest.raises(ValueError, match=match):
+        VideoWriter(path, **args)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_writer_frame_checks(tmp_path):
+    path = tmp_path / "x.mkv"
+    for bad in (np.zeros((8, 8, 3), np.float32), np.zeros((8, 8, 4), np.uint8),
+                np.zeros((2, 8, 8, 3), np.uint8)):
+        with pytest.raises(ValueError, match="frame"):
+            write_video(path, [bad])
+    with pytest.raises(ValueError, match="shape"):
+        write_video(path, np.zeros((8, 8), np.uint8))
+    with pytest.raises(FileNotFoundError):
+        VideoWriter(tmp_path / "missing" / "x.mkv")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_corrupt_truncated_and_missing(tmp_path):
+    frames = _index_frames(12)
+    good = tmp_path / "good.mp4"
+    write_video(good, frames, fps=25, codec="mpeg4", options={"g": "3"})
+    data = good.read_bytes()
+    bad = tmp_path / "bad.mp4"
+    for payload in (b"", b"\x00" * 64, b"not a video at all " * 30, data[:300], data[:40]):
+        bad.write_bytes(payload)
+        for call in (video_info, read_frames, VideoReader):
+            with pytest.raises(ValueError, match=r"bad\.mp4") as exc_info:
+                call(bad)
+            assert "\n" not in str(exc_info.value)
+    for name in ("missing.mp4", "missing.mkv"):
+        with pytest.raises(FileNotFoundError, match="missing"):
+            video_info(tmp_path / name)
+        with pytest.raises(FileNotFoundError, match="missing"):
+            read_frames(tmp_path / name)
+    with pytest.raises(ValueError, match="directory"):
+        video_info(tmp_path)
+    # a damaged middle: frames of the right shape or a one-line ValueError, nothing else
+    damaged = bytearray(data)
+    damaged[len(data) // 3 : len(data) // 3 + 400] = bytes(400)
+    bad.write_bytes(bytes(damaged))
+    try:
+        out = read_frames(bad)
+    except ValueError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert out.shape[1:] == (H, W, 3) and out.dtype == np.uint8
+
+
+def test_truncated_mkv_keeps_complete_frames(tmp_path, rng):
+    frames = rng.integers(0, 256, size=(10, H, W, 3)).astype(np.uint8)
+    path = tmp_path / "clip.mkv"
+    write_video(path, frames)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mkv"
+    cut.write_bytes(data[: len(data) * 6 // 10])
+    n = video_info(cut).n_frames
+    assert 2 <= n < 10
+    try:
+        out = read_frames(cut)
+    except ValueError as exc:  # the last, incomplete frame is damaged
+        assert "cut.mkv" in str(exc)
+        out = read_frames(cut, stop=n - 1)
+    np.testing.assert_array_equal(out, frames[: len(out)])
+
+
+def test_video_selection_errors(tmp_path):
+    path = tmp_path / "clip.mkv"
+    write_video(path, _index_frames(5))
+    with pytest.raises(ValueError, match="at least 2"):
+        read_frames(path, start=4)
+    with pytest.raises(ValueError, match="step"):
+        read_frames(path, step=0)
+    with VideoReader(path) as video:
+        with pytest.raises(IndexError):
+            video.read(5)
+        with pytest.raises(ValueError, match="start"):
+            video.read_range(-1, None)
+        assert video.read_range(9, None).shape == (0, H, W, 3)
+        assert list(video.iter_frames(5)) == []
+        with pytest.raises(ValueError, match="step"):
+            video.iter_frames(0, None, 0)  # checked when called, not when iterated
+        assert "5 frames" in repr(video)
+
+
+# --------------------------------------------------------------------------- varflow video
+
+
+def _moving_frames(n: int, h: int = 32, w: int = 40) -> np.ndarray:
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    return np.stack([
+        np.stack([128 + 80 * np.sin((xx - 1.2 * k) / 4.0), 128 + 70 * np.cos((yy + 0.6 * k) / 5.0),
+                  90 + 60 * np.sin((xx + yy - 0.6 * k) / 7.0)], axis=-1).round().astype(np.uint8)
+        for k in range(n)
+    ])
+
+
+def run_cli(capsys, *args):
+    from varflow.cli import main
+
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_cli_video(tmp_path, capsys):
+    src = tmp_path / "in.mkv"
+    write_video(src, _moving_frames(8), fps=20)
+    out = tmp_path / "flow.mp4"
+    rc, stdout, err = run_cli(capsys, "video", src, "-o", out, "--method", "tvl1-fast",
+                              "--start", 1, "--stride", 2, "-q")
+    assert rc == 0, err
+    assert err == ""
+    info = video_info(out)
+    assert info.n_frames == 3  # frames 1, 3, 5, 7 -> 3 pairs
+    assert info.fps == 10.0 and (info.height, info.width) == (32, 40)
+    assert "3 flows" in stdout and str(out) in stdout and stdout.count("\n") == 1
+
+    sbs = tmp_path / "sbs.mkv"
+    rc, stdout, err = run_cli(capsys, "video", src, "-o", sbs, "--method", "tvl1-fast",
+                              "--stop", 4, "--layout", "side-by-side", "--max-radius", 2, "-q")
+    assert rc == 0, err
+    info = video_info(sbs)
+    assert info.n_frames == 3 and info.width == 3 * 40 + 2 * 4 and info.height > 32
+    panels = read_frames(sbs)
+    assert panels.dtype == np.uint8
+    assert "colour scale 2.000 px" in stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["{missing}", "-o", "{out}"], "missing.mp4"),
+        (["{junk}", "-o", "{out}"], "junk.mp4"),
+        (["{src}", "-o", "{tmp}/flow.gif"], "must end in"),
+        (["{src}", "-o", "{out}", "--stride", "0"], "--stride"),
+        (["{src}", "-o", "{out}", "--start", "7"], "at least 2"),
+        (["{src}", "-o", "{out}", "--method", "nope"], "nope"),
+        (["{src}", "-o", "{out}", "--max-radius", "-1"], "--max-radius"),
+        (["{src}", "-o", "{out}", "--codec", "no-such-codec"], "no-such-codec"),
+    ],
+)
+def test_cli_video_errors(tmp_path, capsys, args, match):
+    src = tmp_path / "in.mkv"
+    write_video(src, _moving_frames(8), fps=20)
+    (tmp_path / "junk.mp4").write_bytes(b"\x00\x01junk" * 50)
+    names = {"missing": tmp_path / "missing.mp4", "junk": tmp_path / "junk.mp4", "src": src,
+             "out": tmp_path / "out.mp4", "tmp": tmp_path}
+    rc, stdout, err = run_cli(capsys, "video", *[a.format(**names) for a in args], "-q")
+    assert rc == 2
+    assert stdout == ""
+    assert err.startswith("varflow: error: ") and err.count("\n") == 1
+    assert "Traceback" not in err
+    assert match in err
+    assert not (tmp_path / "out.mp4").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.mkv", "junk.mp4"]
 
 
 # --------------------------------------------------------------------------- trajectories

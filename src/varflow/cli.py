@@ -21,6 +21,13 @@ Synopsis::
                              [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
                              [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
                              [--quiet] [--<parameter> VALUE ...]
+    varflow video VIDEO -o OUT.mp4|.mkv|.avi [--method NAME] [--start N] [--stop N]
+                  [--stride S] [--layout flow|side-by-side] [--max-radius R]
+    varflow batch flow INPUT... -o OUT [--method NAME] [--stride S | --pairs FILE]
+                  [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
+                  [--format flo|png] [--zarr] [--overwrite] [--<parameter> VALUE ...]
+    varflow batch track INPUT... -o OUT --window F --overlap K [--method NAME] ...
+    varflow report PATH -o REPORT.html [--gt GT.flo] [--title T] [--max-frames N]
 
 Method parameters become flags automatically: every field of the parameter
 dataclass of every registered method is offered as ``--field-name`` (booleans as
@@ -1092,6 +1099,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the RubberWhale frame-11 table")
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_sintel_trajectories)
+
+    # commands that live with their stage: each module's add_parser(sub, common)
+    from .batch import command as batch_command
+    from .io import video_command
+    from .report import command as report_command
+
+    for module in (video_command, batch_command, report_command):
+        module.add_parser(sub, common)
     return parser
 
 

@@ -1,0 +1,192 @@
+"""The ``varflow batch`` sub-command.
+
+Synopsis::
+
+    varflow batch flow INPUT... -o OUT [--method M] [--stride S | --pairs FILE]
+                       [--format flo|png] [--workers N] [--threads-per-worker T]
+                       [--scheduler ADDRESS] [--zarr] [--overwrite] [--quiet]
+                       [--<parameter> VALUE ...]
+    varflow batch track INPUT... -o OUT --window F --overlap K [--method M]
+                        [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
+                        [--zarr] [--overwrite] [--quiet] [--<parameter> VALUE ...]
+
+Exit status: 0 when every task is done, 1 when some input or task failed (after
+all the others finished; the failures are listed on stderr and in the manifest),
+2 on an error that stops the run before it starts (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["add_parser"]
+
+_DESCRIPTION = (
+    "Compute flow between frame pairs (flow) or trajectories over windows of frames "
+    "(track) for many inputs on Dask: a local cluster of --workers processes by default, "
+    "or an existing scheduler.  INPUT is a video, a folder of frames, a folder of videos, "
+    "a glob pattern or "
+    "an input list (.txt/.lst/.list/.jsonl: one path or {\"path\": ..., \"name\": ...} "
+    "per line); results go to OUT/<name>/ with <name> the video's file name without "
+    "extension or the folder's name (two inputs with one name are an error).  Every "
+    "task is recorded in OUT/manifest.sqlite; running the same command again after an "
+    "interruption computes only the unfinished tasks.  A run into an OUT made with other "
+    "settings is refused unless --overwrite."
+)
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+    """Register ``varflow batch flow`` and ``varflow batch track``.
+
+    Parameters
+    ----------
+    sub : argparse sub-parsers action
+        The sub-commands of ``varflow``.
+    common : ArgumentParser
+        Options every command has (``-v``).
+    """
+    from varflow.cli import _add_param_flags, _collect_params, _Parser
+    from varflow.registry import METHODS, TRACKERS
+
+    p = sub.add_parser("batch", help="flow or trajectories for many videos on Dask",
+                       description=_DESCRIPTION)
+    bsub = p.add_subparsers(dest="batch_kind", metavar="KIND", required=True,
+                            parser_class=_Parser)
+    shared = _Parser(add_help=False)
+    shared.add_argument("inputs", nargs="+", metavar="INPUT",
+                        help="videos, frame folders, glob patterns or input lists")
+    shared.add_argument("-o", "--output", required=True, metavar="OUT",
+                        help="output folder (created; holds OUT/<name>/ and manifest.sqlite)")
+    g = shared.add_argument_group("cluster")
+    g.add_argument("--workers", type=_positive, metavar="N",
+                   help="worker processes of the local cluster (default: number of cores)")
+    g.add_argument("--threads-per-worker", type=_positive, metavar="T",
+                   help="tasks run at once per worker; Numba/BLAS/OpenCV pools of each "
+                   "worker are limited to T threads (default 1)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="use an existing Dask scheduler (tcp://host:port) instead of a local "
+                   "cluster; its workers must see the inputs and OUT at the same paths")
+    shared.add_argument("--zarr", action="store_true",
+                        help="also write OUT/<name>.zarr (one chunk per pair or window)")
+    shared.add_argument("--overwrite", action="store_true",
+                        help="discard the results of an earlier run in OUT (also one with "
+                        "other settings) and start again")
+    shared.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+    f = bsub.add_parser("flow", parents=[common, shared],
+                        help="flow for frame pairs: OUT/<name>/NNNNNN.flo",
+                        description="Flow from frame N to frame N+S of every input (N "
+                        "zero-based): OUT/<name>/NNNNNN.flo (or .png, KITTI 16-bit).  With "
+                        "--pairs FILE (lines 'I J'), the listed pairs of every input: "
+                        "OUT/<name>/IIIIII_JJJJJJ.flo.")
+    f.add_argument("--method", default="tvl1", metavar="NAME",
+                   help=f"one of: {', '.join(METHODS)} (default tvl1)")
+    x = f.add_mutually_exclusive_group()
+    x.add_argument("--stride", type=_positive, metavar="S",
+                   help="frame gap of the pairs (default 1)")
+    x.add_argument("--pairs", metavar="FILE",
+                   help="text file of pairs 'I J' (zero-based frame indices), one per line")
+    f.add_argument("--format", choices=("flo", "png"), default="flo",
+                   help="output format: Middlebury .flo or KITTI 16-bit .png (default flo)")
+    _add_param_flags(f, _collect_params())
+    f.set_defaults(func=_cmd_batch_flow)
+
+    t = bsub.add_parser("track", parents=[common, shared],
+                        help="trajectories over windows: OUT/<name>/window_SSSSSS.npz",
+                        description="Trajectories of the centre frame's pixels over windows "
+                        "of F frames overlapping by K (a last window ends at the last "
+                        "frame): OUT/<name>/window_SSSSSS.npz (S = first frame), with "
+                        "visibility and metadata (frames, reference, input, parameters).")
+    t.add_argument("--window", type=_positive, required=True, metavar="F",
+                   help="frames per window (>= 2)")
+    t.add_argument("--overlap", type=_non_negative, required=True, metavar="K",
+                   help="frames shared by consecutive windows (< F)")
+    t.add_argument("--method", default="rlr", metavar="NAME",
+                   help=f"one of: {', '.join(TRACKERS)} (default rlr)")
+    _add_param_flags(t, _collect_params(TRACKERS), n_methods=len(TRACKERS))
+    t.set_defaults(func=_cmd_batch_track)
+
+
+def _cmd_batch_flow(args: argparse.Namespace) -> int:
+    from varflow.cli import _own_params
+    from varflow.registry import get_method, make_params
+
+    from .plan import BatchConfig, read_pairs_file
+
+    method = get_method(args.method)
+    params = make_params(method, **_own_params(args, method, "method"))
+    pairs = read_pairs_file(args.pairs) if args.pairs else None
+    config = BatchConfig("flow", method.name, params, fmt=args.format,
+                         stride=args.stride or 1, pairs=pairs)
+    return _run(args, config)
+
+
+def _cmd_batch_track(args: argparse.Namespace) -> int:
+    from varflow.cli import _own_params
+    from varflow.registry import get_tracker, make_track_params
+
+    from .plan import BatchConfig
+
+    tracker = get_tracker(args.method)
+    params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
+    config = BatchConfig("track", tracker.name, params, fmt="npz", window=args.window,
+                         overlap=args.overlap)
+    return _run(args, config)
+
+
+_MAX_LISTED = 20
+
+
+def _run(args: argparse.Namespace, config: Any) -> int:
+    from varflow.cli import _Progress
+
+    from .inputs import expand_inputs
+    from .runner import run_batch
+
+    if args.scheduler and (args.workers is not None or args.threads_per_worker is not None):
+        raise ValueError("--workers/--threads-per-worker set up a local cluster; leave them "
+                         "out with --scheduler")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "-o/--output: not a directory", str(out))
+    inputs = expand_inputs(args.inputs)
+    command = {k: v for k, v in vars(args).items() if k != "func"}
+    unit = "pair" if config.kind == "flow" else "window"
+    with _Progress(f"batch {config.kind}", args.quiet, unit=unit) as progress:
+        summary = run_batch(
+            inputs, out, config,
+            workers=args.workers,
+            threads=args.threads_per_worker or 1,
+            scheduler=args.scheduler,
+            overwrite=args.overwrite,
+            zarr=args.zarr,
+            progress=progress,
+            command=command,
+        )
+    for task_id, error in summary.failures[:_MAX_LISTED]:
+        print(f"varflow: failed: {task_id}: {error}", file=sys.stderr)
+    if len(summary.failures) > _MAX_LISTED:
+        print(f"varflow: ... and {len(summary.failures) - _MAX_LISTED} more failures (see "
+              f"{out / 'manifest.sqlite'})", file=sys.stderr)
+    print(f"batch {config.kind}: {summary.total} tasks: {summary.done} done, "
+          f"{summary.skipped} skipped, {summary.failed} failed; {summary.done} "
+          f"{summary.unit} in {summary.seconds:.2f} s ({summary.throughput:.2f} "
+          f"{summary.unit}/s) -> {out}")
+    return 0 if summary.ok else 1
