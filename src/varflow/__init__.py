@@ -214,6 +214,8 @@ def flow(
     shape = np.shape(frame0)
     if len(shape) in (2, 3):  # anything else is reported by the input checks
         check_memory(m.name, shape, 2, p)
+    if m.run is not None:  # a pipeline with stages around the driver (tvl1-ld)
+        return m.run(frame0, frame1, p, init_flow=init_flow, callback=callback, stats=stats)
     return coarse_to_fine(
         frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback, stats=stats
     )

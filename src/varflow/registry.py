@@ -2,7 +2,8 @@
 
 :data:`METHODS` maps a two-frame method name to a :class:`Method`: its frozen
 parameter dataclass, its single-level warp solver (plugged into
-:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`) and a one-line description.
+:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`), a one-line description and,
+for a method with stages around the driver (``tvl1-ld``), the function that runs it.
 :data:`TRACKERS` maps a multi-frame (trajectory) method name to a :class:`Tracker`:
 its parameter dataclass and its ``track(frames, ref, params, callback)`` function.
 """
@@ -10,12 +11,14 @@ its parameter dataclass and its ``track(frames, ref, params, callback)`` functio
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from .multiframe import mfsf as _mfsf
 from .multiframe import rlr as _rlr
 from .multiframe import track as _track
+from .twoframe import large_displacement as _ld
 from .twoframe import sparse as _sparse
 from .twoframe import tensor as _tensor
 from .twoframe import tvl1 as _tvl1
@@ -45,12 +48,17 @@ class Method:
     solve_warp : callable
         Single-level, single-warp solver.
     description : str
+    run : callable, optional
+        ``run(frame0, frame1, params, init_flow=None, callback=None, stats=None)``
+        for a method whose pipeline has stages around the coarse-to-fine driver
+        (which it calls with ``solve_warp``); None: the driver alone.
     """
 
     name: str
     params: type[CoarseToFineParams]
     solve_warp: WarpSolver
     description: str
+    run: Callable[..., Any] | None = None
 
 
 METHODS: dict[str, Method] = {
@@ -65,6 +73,14 @@ METHODS: dict[str, Method] = {
         params=_tvl1.TVL1FastParams,
         solve_warp=_tvl1.solve_warp,
         description="TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
+    ),
+    "tvl1-ld": Method(
+        name="tvl1-ld",
+        params=_ld.LargeDisplacementParams,
+        solve_warp=_tvl1.solve_warp,
+        description="TV-L1 for large displacements (PatchMatch matches, edge-aware "
+        "interpolation, fused per level)",
+        run=_ld.tvl1_ld,
     ),
     "tensor": Method(
         name="tensor",

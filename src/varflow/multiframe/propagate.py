@@ -18,6 +18,14 @@ at the coarse levels.  Here the frames are visited outward from the reference,
   photographic clips the fusion let chance matches of the direct flow in on the
   far frames (mean EPE 1.64 against 0.88 with the propagated candidate alone).
 
+* **matching-guided** (only with ``matching=True``): the two-frame flow from the
+  reference to frame ``n`` computed as ``tvl1-ld`` does
+  (:mod:`varflow.twoframe.large_displacement`): descriptor matches between the
+  two frames, interpolated edge-aware, fused into every pyramid level.  It
+  replaces the direct flow of ``r ± 1`` and is a candidate of every farther frame,
+  so a structure that moves farther than its size between the reference and a
+  far frame is found again even when the propagation lost it.
+
 Where they disagree the pixel keeps the candidate with the smaller edge-aware
 photometric cost (:func:`varflow.ops.fusion.fuse`: the colour constancy residual
 aggregated with adaptive support weights of the reference frame); the propagated
@@ -53,6 +61,7 @@ import numpy as np
 from ..ops.fusion import fuse, repair, repair_margin, support_weights
 from ..ops.pyramid import pyramid_shapes
 from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids, prepare_pyramid
+from ..twoframe.large_displacement import LargeDisplacementParams, fusion_hook, matching_flow
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 from .track import TrackCallback
 
@@ -99,6 +108,7 @@ def propagate_trajectories(
     *,
     levels: int = 3,
     direct: bool = False,
+    matching: bool = False,
     repair_distances: tuple[int, ...] = (2, 4, 8),
     repair_adjacent: bool = True,
     support_radius: int = 2,
@@ -122,6 +132,8 @@ def propagate_trajectories(
     direct : bool
         Also compute the direct candidate of every frame beyond ``r ± 1`` and fuse;
         False keeps the propagated candidates alone.
+    matching : bool
+        Add the matching-guided candidate of every frame (see the module notes).
     repair_distances : tuple of int
         Offsets of :func:`varflow.ops.fusion.repair`; empty = no repair.
     repair_adjacent : bool
@@ -154,6 +166,7 @@ def propagate_trajectories(
     n_flows = 0
     kept_direct: list[float] = []
     repaired: list[float] = []
+    ld_params = LargeDisplacementParams() if matching else None
     for i, n in enumerate(todo):
         s = 1 if n > ref else -1
         cands = []
@@ -162,8 +175,13 @@ def propagate_trajectories(
             guess = extrapolate(traj[n - s], prev2)
             cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params,
                                                  init_flow=guess, levels=levels))
-        if direct or not cands:
-            cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params))
+        hook = None
+        if ld_params is not None:
+            dense = matching_flow(frames[ref], frames[n], ld_params)
+            hook = None if dense is None else fusion_hook(dense, ld_params)
+        if direct or not cands or hook is not None:
+            cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params,
+                                                 level_hook=hook))
         n_flows += len(cands)
         if len(cands) > 1:
             flow, choice = fuse(frames[ref], frames[n], cands, weights)

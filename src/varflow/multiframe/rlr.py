@@ -209,6 +209,11 @@ class MultiFrameParams(TVL1Params):
         With ``init="propagate"``: also compute each far frame's direct two-frame
         flow from the reference and keep, per pixel, the candidate that fits the
         frames better.  Default False.
+    propagate_matching : bool
+        With ``init="propagate"``: add every frame's matching-guided flow from the
+        reference (descriptor matches fused into the pyramid, as the ``tvl1-ld``
+        method does) as a candidate, for clips whose motion outruns the pyramid
+        (a structure moving farther than its own size).  Default False.
     visibility : bool
         Estimate which reference points are hidden in which frame from the
         initial trajectories (:mod:`varflow.multiframe.visibility`) and switch the
@@ -263,6 +268,7 @@ class MultiFrameParams(TVL1Params):
     ustep_tolerance: float = 0.0
     propagate_levels: int = 3
     propagate_direct: bool = False
+    propagate_matching: bool = False
     visibility: bool = True
     fb_tolerance: float = 1.5
     photo_factor: float = 4.0
@@ -1094,7 +1100,8 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         return propagate_trajectories(frames, ref, params, pyramids,
                                       repair_adjacent=params.repair_adjacent,
                                       levels=params.propagate_levels,
-                                      direct=params.propagate_direct, callback=callback)
+                                      direct=params.propagate_direct,
+                                      matching=params.propagate_matching, callback=callback)
     if params.init == "twoframe":
         traj = np.zeros(frames.shape[:3] + (2,), np.float32)
         others = [n for n in range(frames.shape[0]) if n != ref]
@@ -1206,7 +1213,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         t0 = time.perf_counter()
         vparams = params.visibility_params()
         bparams = replace(params, n_warps=params.visibility_warps)
-        back = backward_flows(init, ref, pyrs, bparams, vparams.backward_levels, tick)
+        back = backward_flows(init, ref, pyrs, bparams, vparams.backward_levels, tick,
+                              splat=params.propagate_matching)
         visible = visibility_from(init, back, ref, [p[0] for p in pyrs], vparams)
         stats["visibility_seconds"] = time.perf_counter() - t0
 

@@ -10,8 +10,13 @@ must pass:
    back where it started, ``|T_n(x) + B_n(x + T_n(x))| ≤ fb_tolerance`` (pixels).
    A point hidden in frame ``n`` has no correspondence there: the backward flow at
    its position belongs to the surface in front and points elsewhere.  ``B_n`` is
-   the inverse of ``T_n`` (fixed-point inversion) refined by the two-frame solver
-   on the finest pyramid levels.
+   the inverse of ``T_n`` refined by the two-frame solver on the finest pyramid
+   levels; the inverse is the fixed-point inversion (exact where ``T_n`` is
+   smooth) or, with ``splat=True`` (for trajectories from matching, see
+   :attr:`varflow.multiframe.rlr.MultiFrameParams.propagate_matching`), per pixel
+   the better fit to the frames of it and the splatted one (every reference pixel
+   sends ``−T_n`` to where it lands, which follows a small object moving farther
+   than its size, where the fixed point takes the motion of the surroundings).
 3. **Photometric residual**: the edge-aware photometric cost of ``T_n``
    (:func:`varflow.ops.fusion.flow_cost` on the pre-processed frames) is at most
    ``photo_factor`` times its median over the frame's in-bound pixels (at least
@@ -38,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..ops.fusion import flow_cost, support_weights
+from ..ops.fusion import flow_cost, fuse, support_weights
 from ..ops.warp import in_bounds, warp_bicubic
 from ..twoframe.coarse_to_fine import _check, coarse_to_fine_pyramids
 from ..twoframe.tvl1 import TVL1Params, solve_warp
@@ -46,6 +51,7 @@ from ..twoframe.tvl1 import TVL1Params, solve_warp
 __all__ = [
     "VisibilityParams",
     "invert_flow",
+    "splat_inverse",
     "in_bounds",
     "fb_error",
     "backward_flows",
@@ -114,6 +120,41 @@ def invert_flow(flow: np.ndarray, iterations: int = 5) -> np.ndarray:
     return b.astype(np.float32)
 
 
+def splat_inverse(flow: np.ndarray) -> np.ndarray:
+    """Inverse of a flow by forward splatting: ``b(round(x + w(x))) = −w(x)``.
+
+    Where several pixels land on one target, the one with the largest ``|w|`` wins
+    (a moving object is more often in front of the slower background); targets
+    that nothing lands on are NaN.
+
+    Parameters
+    ----------
+    flow : ndarray, shape (H, W, 2)
+        Forward flow from frame A to frame B.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+        Flow from B to A, NaN where no pixel of A lands.
+    """
+    w = np.asarray(flow, np.float32)
+    h, wd = w.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:wd]
+    tx = np.rint(xx + w[..., 0])
+    ty = np.rint(yy + w[..., 1])
+    ok = np.isfinite(tx) & np.isfinite(ty) & (tx >= 0) & (tx <= wd - 1) & (ty >= 0) & (ty <= h - 1)
+    src = np.flatnonzero(ok)
+    dst = ty[ok].astype(np.int64) * wd + tx[ok].astype(np.int64)
+    mag = np.hypot(w[..., 0], w[..., 1]).ravel()[src]
+    order = np.lexsort((src, mag))  # by |w|, then by index: ties resolved the same way
+    best = np.full(h * wd, -1, np.int64)
+    best[dst[order]] = src[order]  # sorted ascending: the last write is the largest |w|
+    out = np.full((h * wd, 2), np.nan, np.float32)
+    hit = best >= 0
+    out[hit] = -w.reshape(-1, 2)[best[hit]]
+    return out.reshape(h, wd, 2)
+
+
 def fb_error(forward: np.ndarray, backward: np.ndarray) -> np.ndarray:
     """Forward-backward error ``|w(x) + b(x + w(x))|``: ``(H, W)`` float32, pixels."""
     sampled, _ = warp_bicubic(np.ascontiguousarray(backward, np.float32), forward)
@@ -133,11 +174,14 @@ def backward_flows(
     flow_params: TVL1Params,
     levels: int = 3,
     callback: Callable[[], None] | None = None,
+    splat: bool = False,
 ) -> np.ndarray:
     """Flows from every frame back to the reference, from the inverted trajectories.
 
-    ``B_n`` = :func:`invert_flow` of ``T_n`` refined by TV-L1 from frame ``n`` to the
-    reference on the finest ``levels`` pyramid levels.
+    ``B_n`` = :func:`invert_flow` of ``T_n`` (with ``splat``: per pixel the better
+    fit, by :func:`varflow.ops.fusion.fuse` on the pre-processed frames, of it and
+    :func:`splat_inverse`), refined by TV-L1 from frame ``n`` to the reference on
+    the finest ``levels`` pyramid levels.
 
     Parameters
     ----------
@@ -149,6 +193,8 @@ def backward_flows(
     levels : int
     callback : callable, optional
         Called without arguments after each flow.
+    splat : bool
+        Offer the splatted inverse as a second initial candidate.
 
     Returns
     -------
@@ -158,9 +204,14 @@ def backward_flows(
     back = np.zeros_like(traj, dtype=np.float32)
     for n in range(traj.shape[0]):
         if n != ref:
+            init = invert_flow(traj[n])
+            if splat:
+                splatted = splat_inverse(traj[n])
+                splatted = np.where(np.isnan(splatted), init, splatted)
+                tex_n, tex_r = pyramids[n][0], pyramids[ref][0]
+                init, _ = fuse(tex_n, tex_r, [init, splatted], support_weights(tex_n))
             back[n] = coarse_to_fine_pyramids(pyramids[n], pyramids[ref], solve_warp,
-                                              flow_params, init_flow=invert_flow(traj[n]),
-                                              levels=levels)
+                                              flow_params, init_flow=init, levels=levels)
             if callback is not None:
                 callback()
     return back
@@ -220,6 +271,7 @@ def estimate_visibility(
     flow_params: TVL1Params,
     params: VisibilityParams | None = None,
     stats: dict | None = None,
+    splat: bool = False,
 ) -> np.ndarray:
     """Visibility of every reference pixel in every frame (see the module notes).
 
@@ -238,6 +290,8 @@ def estimate_visibility(
     stats : dict, optional
         Gains ``seconds``, ``hidden`` (share of hidden (frame ≠ ref, pixel) pairs)
         and ``backward`` (the backward flows, for :func:`visibility_from`).
+    splat : bool
+        See :func:`backward_flows`.
 
     Returns
     -------
@@ -245,7 +299,8 @@ def estimate_visibility(
     """
     params = params or VisibilityParams()
     t0 = time.perf_counter()
-    back = backward_flows(traj, ref, pyramids, flow_params, params.backward_levels)
+    back = backward_flows(traj, ref, pyramids, flow_params, params.backward_levels,
+                          splat=splat)
     visible = visibility_from(traj, back, ref, [p[0] for p in pyramids], params)
     if stats is not None:
         others = np.arange(traj.shape[0]) != ref

@@ -41,11 +41,19 @@ __all__ = [
     "coarse_to_fine_pyramids",
     "prepare_pyramid",
     "ProgressCallback",
+    "LevelHook",
 ]
 
 log = logging.getLogger(__name__)
 
 ProgressCallback = Callable[[int, int], None]
+
+#: ``level_hook(level, i0, i1, flow, stats) -> flow``: called at the start of every
+#: pyramid level, before its first warp, with the level's pre-processed frames
+#: ``(h, w, C)`` and the flow carried from the coarser level ``(h, w, 2)`` (in this
+#: level's pixels); it returns the flow the level starts from (e.g. fused with a
+#: candidate from feature matching, see :mod:`varflow.twoframe.large_displacement`).
+LevelHook = Callable[[int, np.ndarray, np.ndarray, np.ndarray, dict], np.ndarray]
 
 
 def _check(cond: bool, field: str, msg: str) -> None:
@@ -211,13 +219,15 @@ def coarse_to_fine(
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
     levels: int | None = None,
+    level_hook: LevelHook | None = None,
 ) -> np.ndarray:
     """Estimate the flow from ``frame0`` to ``frame1`` coarse to fine.
 
     Parameters
     ----------
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
-        uint8, uint16 or float in [0, 1]; see :func:`varflow._validate.as_float_image`.
+        uint8, uint16 or float (float frames outside [0, 1] are scaled jointly; see
+        :mod:`varflow._validate`).
     solve_warp : callable
         The method's single-level, single-warp solver (see module docstring).
     params : CoarseToFineParams (or a subclass)
@@ -235,6 +245,8 @@ def coarse_to_fine(
     levels : int, optional
         Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
         default all.
+    level_hook : callable, optional
+        :data:`LevelHook`, called at the start of every level.
 
     Returns
     -------
@@ -254,7 +266,8 @@ def coarse_to_fine(
         shapes = shapes[:levels]
     pyr0 = prepare_pyramid(I0, params, shapes)
     pyr1 = prepare_pyramid(I1, params, shapes)
-    flow = coarse_to_fine_pyramids(pyr0, pyr1, solve_warp, params, init_flow, callback, stats)
+    flow = coarse_to_fine_pyramids(pyr0, pyr1, solve_warp, params, init_flow, callback, stats,
+                                   level_hook=level_hook)
     stats["seconds"] = time.perf_counter() - t_start
     return flow
 
@@ -268,6 +281,7 @@ def coarse_to_fine_pyramids(
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
     levels: int | None = None,
+    level_hook: LevelHook | None = None,
 ) -> np.ndarray:
     """:func:`coarse_to_fine` on pyramids built by :func:`prepare_pyramid`.
 
@@ -275,7 +289,7 @@ def coarse_to_fine_pyramids(
     ----------
     pyr0, pyr1 : list of ndarray, each (h, w, C) float32
         Pre-processed pyramids of the two frames, finest first, of equal shapes.
-    solve_warp, params, init_flow, callback, stats, levels
+    solve_warp, params, init_flow, callback, stats, levels, level_hook
         As in :func:`coarse_to_fine` (``levels`` takes the finest levels of the
         given pyramids).
 
@@ -302,6 +316,8 @@ def coarse_to_fine_pyramids(
         i0, i1 = pyr0[level], pyr1[level]
         if flow.shape[:2] != i0.shape[:2]:
             flow = resize_flow(flow, i0.shape[:2])
+        if level_hook is not None:
+            flow = level_hook(level, i0, i1, flow, stats)
         planes = derivative_planes(i1)
         state = {"level": level, "previous": state, "stats": stats}
         state["previous"].pop("previous", None)  # keep only one level of history
