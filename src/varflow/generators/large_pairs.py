@@ -48,6 +48,7 @@ from .photo import (
     _objects,
     _PhotoLayer,
     _render,
+    split_cases,
 )
 from .photo_pairs import PhotoPair, _affine_matrix
 from .sequences import _check_int, _trajectories
@@ -201,11 +202,4 @@ def large_pair_cases(split: str, families: Sequence[str] = FAMILIES) -> list[tup
     -------
     list of (str, int)
     """
-    if split not in SPLITS:
-        raise ValueError(f"split: expected one of {tuple(SPLITS)}, got {split!r}")
-    if isinstance(families, str):
-        raise ValueError(f"families: expected a sequence of names, got the string {families!r}")
-    for f in families:
-        if f not in FAMILIES:
-            raise ValueError(f"families: expected names from {FAMILIES}, got {f!r}")
-    return [(f, s) for f in families for s in SPLITS[split]]
+    return split_cases(split, families, FAMILIES, SPLITS)

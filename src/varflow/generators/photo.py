@@ -150,7 +150,7 @@ with subspace constraints", International Journal of Computer Vision 104(3),
 from __future__ import annotations
 
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -1221,8 +1221,8 @@ def photo_cases(split: str, families: Sequence[str] = FAMILIES) -> list[tuple[st
     return split_cases(split, families, FAMILIES)
 
 
-def split_cases(split: str, families: Sequence[str],
-                known: Sequence[str]) -> list[tuple[str, int]]:
+def split_cases(split: str, families: Sequence[str], known: Sequence[str],
+                splits: Mapping[str, Sequence[int]] | None = None) -> list[tuple[str, int]]:
     """The ``(family, seed)`` cases of a split for any family list, family-major.
 
     Shared by :func:`photo_cases` and :func:`varflow.generators.photo_pairs.photo_pair_cases`.
@@ -1234,19 +1234,22 @@ def split_cases(split: str, families: Sequence[str],
         Checked against ``known``.
     known : sequence of str
         The generator's family names.
+    splits : mapping, optional
+        Split name -> seeds (default :data:`SPLITS`).
 
     Returns
     -------
     list of (str, int)
     """
-    if split not in SPLITS:
-        raise ValueError(f"split: expected one of {tuple(SPLITS)}, got {split!r}")
+    splits = SPLITS if splits is None else splits
+    if split not in splits:
+        raise ValueError(f"split: expected one of {tuple(splits)}, got {split!r}")
     if isinstance(families, str):
         raise ValueError(f"families: expected a sequence of names, got the string {families!r}")
     for f in families:
         if f not in known:
             raise ValueError(f"families: expected names from {known}, got {f!r}")
-    return [(f, s) for f in families for s in SPLITS[split]]
+    return [(f, s) for f in families for s in splits[split]]
 
 
 def photo_suite(
