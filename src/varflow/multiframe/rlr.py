@@ -118,6 +118,7 @@ from ..twoframe.tvl1 import (
     TVL1Params,
     _data_prox_row,
     _dual_row,
+    _ordered_sum,
     _primal_row,
     _row_blocks,
     edge_weight,
@@ -959,22 +960,20 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
     sigma = _F1 / (np.float32(8.0) * s)
     tol2 = tol * tol
     n_blk = blocks.shape[0] - 1
-    errs = np.zeros(n_blk, np.float64)
+    errs = np.zeros(h, np.float64)  # per row: the stopping test does not depend on blocks
     old = np.empty((n_blk, 2, w), np.float32)
     sc = np.empty((n_blk, 4, nk), np.float64)
     it = 0
     while it < max_iter:
         it += 1
         for b in nb.prange(n_blk):
-            err = 0.0
             for i in range(blocks[b], blocks[b + 1]):
-                err += _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old[b], s, t,
-                                         n_sweeps, exact, sc[b])
-            errs[b] = err
+                errs[i] = _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old[b], s,
+                                            t, n_sweeps, exact, sc[b])
         for b in nb.prange(n_blk):
             for i in range(blocks[b], blocks[b + 1]):
                 _dual_row(ubar, p, p, g, _NO_TENSOR, i, sigma, False)
-        if errs.sum() / (h * w) < tol2:
+        if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 

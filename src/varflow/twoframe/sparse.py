@@ -71,6 +71,7 @@ from .tensor import TensorParams, init_tensor_level
 from .tvl1 import (
     _EPS_GRAD,
     _dual_row,
+    _ordered_sum,
     _primal_row,
     _row_blocks,
     edge_weight,
@@ -725,7 +726,7 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
         for i in range(blocks[b], blocks[b + 1]):
             for j in range(w):
                 sw[i, j] = _F1 / (_F1 + 2 * theta * wsp[i, j])
-    errs = np.zeros(n_blk, np.float64)
+    errs = np.zeros(h, np.float64)  # per row: the stopping test does not depend on blocks
     buf = np.empty((n_blk, 3, w), np.float32)
     it = 0
     while it < max_iter:
@@ -736,7 +737,6 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
             d1 = buf[b, 0]
             d2 = buf[b, 1]
             tr = buf[b, 2]
-            err = 0.0
             for i in range(r0, r1):
                 sr = sw[i]
                 u1 = u[0, i]
@@ -749,14 +749,13 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
                     d2[j] = s * u2[j] + (_F1 - s) * b2[j]
                     tr[j] = lam * theta * s
                 _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps)
-                err += _primal_row(u, tp, i, 0, d1, theta)
-                err += _primal_row(u, tp, i, 1, d2, theta)
+                err = _primal_row(u, tp, i, 0, d1, theta)
+                errs[i] = err + _primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
                     _dual_row(u, p, tp, gs, tens, i - 1, step, aniso)
-            errs[b] = err
         for b in nb.prange(n_blk):
             _dual_row(u, p, tp, gs, tens, blocks[b + 1] - 1, step, aniso)
-        if errs.sum() / (h * w) < tol2:
+        if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 

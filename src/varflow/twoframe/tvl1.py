@@ -232,6 +232,16 @@ _F1 = np.float32(1.0)
 _EPS_GRAD = np.float32(1e-12)
 
 
+@nb.njit(cache=True, inline="always")
+def _ordered_sum(x):
+    """Sum of a 1-D array in index order (a plain loop: the same float result for any
+    thread count, where a reduction inside a parallel kernel may split it)."""
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += x[i]
+    return total
+
+
 def _row_blocks(h: int) -> np.ndarray:
     """Split ``h`` rows into contiguous blocks, a few per thread (bounds, length n+1)."""
     n = max(1, min(h // 4, 4 * nb.get_num_threads()))
@@ -441,7 +451,7 @@ def tvl1_iterations(
     step = tau / theta
     tol2 = tol * tol
     n_blk = blocks.shape[0] - 1
-    errs = np.zeros(n_blk, np.float64)
+    errs = np.zeros(h, np.float64)  # per row: the stopping test does not depend on blocks
     buf = np.empty((n_blk, 2, w), np.float32)
     it = 0
     while it < max_iter:
@@ -451,20 +461,18 @@ def tvl1_iterations(
             r1 = blocks[b + 1]
             d1 = buf[b, 0]
             d2 = buf[b, 1]
-            err = 0.0
             for i in range(r0, r1):
                 for j in range(w):
                     d1[j] = u[0, i, j]
                     d2[j] = u[1, i, j]
                 _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
-                err += _primal_row(u, tp, i, 0, d1, theta)
-                err += _primal_row(u, tp, i, 1, d2, theta)
+                err = _primal_row(u, tp, i, 0, d1, theta)
+                errs[i] = err + _primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
                     _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
-            errs[b] = err
         for b in nb.prange(n_blk):
             _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
-        if errs.sum() / (h * w) < tol2:
+        if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
