@@ -30,3 +30,31 @@ def data_root() -> Path:
             pytest.fail(msg)
         pytest.skip(msg)
     return root
+
+
+_WARM_UP = """
+import numpy as np, varflow
+from varflow.generators.pairs import synthetic_pair
+f0, f1, _ = synthetic_pair("translation", shape=(40, 48), magnitude=1.0, seed=0)
+for m in ("tvl1", "tvl1-fast", "tensor"):
+    varflow.flow(f0, f1, m)
+frames = np.stack([f0, f1, f0, f1, f0])
+for t in ("rlr", "chain", "twoframe"):
+    varflow.track(frames, 2, t)
+"""
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile and cache the main Numba kernels in a subprocess before any test runs.
+
+    A kernel compiled in a process can give results that differ in the last bits from
+    the same kernel loaded from Numba's cache (the two compilation paths of
+    ``parallel=True, fastmath=True`` kernels); the tests that compare outputs across
+    processes (batch workers, thread counts) need every process to run the cached
+    code, as every run after the first does.
+    """
+    import subprocess
+    import sys
+
+    subprocess.run([sys.executable, "-c", _WARM_UP], check=False, capture_output=True,
+                   timeout=1800)
