@@ -558,6 +558,22 @@ def test_cli_video(tmp_path, capsys):
     assert panels.dtype == np.uint8
     assert "colour scale 2.000 px" in stdout
 
+    # the next frame warped back by the flow looks like the frame itself (lossless ffv1)
+    warped = tmp_path / "warped.mkv"
+    rc, stdout, err = run_cli(capsys, "video", src, "-o", warped, "--method", "tvl1",
+                              "--stop", 3, "--layout", "warped", "-q")
+    assert rc == 0, err
+    back = read_frames(warped).astype(np.float32)
+    frames = _moving_frames(8)
+    assert back.shape[0] == 2 and back.shape[1:3] == frames.shape[1:3]
+    interior = (slice(None), slice(6, -6), slice(6, -6))
+    ref = frames[:2].astype(np.float32)
+    if ref.ndim == 3:
+        ref = np.repeat(ref[..., None], 3, axis=-1)
+    aligned = np.abs(back - ref)[interior].mean()
+    unaligned = np.abs(read_frames(src)[1:3].astype(np.float32) - frames[:2])[interior].mean()
+    assert aligned < 0.5 * unaligned
+
 
 @pytest.mark.parametrize(
     ("args", "match"),

@@ -22,7 +22,7 @@ Synopsis::
                              [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
                              [--quiet] [--<parameter> VALUE ...]
     varflow video VIDEO -o OUT.mp4|.mkv|.avi [--method NAME] [--start N] [--stop N]
-                  [--stride S] [--layout flow|side-by-side] [--max-radius R]
+                  [--stride S] [--layout flow|side-by-side|warped] [--max-radius R]
     varflow batch flow INPUT... -o OUT [--method NAME] [--stride S | --pairs FILE]
                   [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
                   [--format flo|png] [--zarr] [--overwrite] [--<parameter> VALUE ...]

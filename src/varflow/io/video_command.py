@@ -3,7 +3,7 @@
 Synopsis::
 
     varflow video VIDEO -o OUT.(mp4|mkv|avi) [--method NAME] [--start N] [--stop N]
-                  [--stride S] [--layout flow|side-by-side] [--max-radius R]
+                  [--stride S] [--layout flow|side-by-side|warped] [--max-radius R]
                   [--codec C] [--quality Q] [-q]
 
 The frames ``start, start + S, start + 2S, ... < stop`` are read (streaming, with
@@ -70,8 +70,10 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                    help="end frame, exclusive (default: the end of the video)")
     p.add_argument("--stride", type=int, default=1, metavar="S",
                    help="use every S-th frame; flows of the pairs (i, i+S) (default 1)")
-    p.add_argument("--layout", choices=("flow", "side-by-side"), default="flow",
-                   help="colour flow only, or frame | colour flow | warped next frame")
+    p.add_argument("--layout", choices=("flow", "side-by-side", "warped"), default="flow",
+                   help="colour flow only; frame | colour flow | warped next frame; or the "
+                   "next frame warped back onto each frame by its flow (grey where the flow "
+                   "points outside it)")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="flow magnitude of full colour saturation (default: the maximum over "
                    "all pairs, computed in a first pass)")
@@ -93,11 +95,14 @@ def _render(
     layout: str, flow: np.ndarray, f0: np.ndarray | None, f1: np.ndarray | None,
     radius: float, legend: bool,
 ) -> np.ndarray:
-    from ..viz.video import flow_frame, side_by_side
+    from ..viz.video import flow_frame, grey_out_invalid, side_by_side, warp_next_frame
 
     if layout == "flow":
         return flow_frame(flow, radius, legend=legend)
     assert f0 is not None and f1 is not None
+    if layout == "warped":
+        warped, valid = warp_next_frame(f1, flow)
+        return grey_out_invalid(warped, valid)
     return side_by_side(f0, flow, f1, radius, legend=legend)
 
 
@@ -168,7 +173,7 @@ def _cmd_video(args: argparse.Namespace) -> int:
             if store is not None:
                 radius = peak * (1.0 + 1e-5) if peak > 0 else 1.0
                 store.flush()
-                pairs = _pairs(frames()) if args.layout == "side-by-side" else None
+                pairs = _pairs(frames()) if args.layout != "flow" else None
                 for k in range(n_pairs):
                     f0, f1 = next(pairs) if pairs is not None else (None, None)
                     writer.write(_render(args.layout, np.asarray(store[k]), f0, f1, radius,
