@@ -32,9 +32,16 @@ import hashlib
 import json
 import logging
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
+
+from ..io.video import (
+    IMAGE_EXTENSIONS,
+    VIDEO_EXTENSIONS,
+    _natural_key,
+    list_frame_files,
+    video_info,
+)
 
 __all__ = ["BatchInput", "InputProbe", "LIST_EXTENSIONS", "expand_inputs", "probe_input"]
 
@@ -43,7 +50,6 @@ log = logging.getLogger(__name__)
 #: Extensions of input-list files (lower case, with the dot).
 LIST_EXTENSIONS: frozenset[str] = frozenset({".txt", ".lst", ".list", ".jsonl"})
 
-_DIGITS = re.compile(r"([0-9]+)")
 _RESERVED = ("manifest.sqlite", "manifest.lock")
 
 
@@ -89,18 +95,6 @@ def _has_magic(text: str) -> bool:
     return any(c in text for c in "*?[")
 
 
-def _video_extensions() -> frozenset[str]:
-    from ..io.video import VIDEO_EXTENSIONS
-
-    return VIDEO_EXTENSIONS
-
-
-def _image_extensions() -> frozenset[str]:
-    from ..io.video import IMAGE_EXTENSIONS
-
-    return IMAGE_EXTENSIONS
-
-
 def _check_name(name: str, origin: str) -> str:
     bad = (
         not name
@@ -122,11 +116,9 @@ def _check_name(name: str, origin: str) -> str:
 
 def _videos_in(directory: Path) -> list[Path]:
     """The video files directly inside a folder that holds no still images."""
-    from ..io.video import list_frame_files
-
     if list_frame_files(directory):
         return []
-    exts = _video_extensions()
+    exts = VIDEO_EXTENSIONS
     videos = [p for p in directory.iterdir()
               if not p.name.startswith(".") and p.suffix.lower() in exts and p.is_file()]
     return [Path(p) for p in _natural([str(v) for v in videos])]
@@ -145,22 +137,17 @@ def _classify(path: Path, origin: str, name: str | None, strict: bool) -> list[B
         return [BatchInput(path.absolute(), _check_name(name or path.absolute().name, origin),
                            "folder")]
     suffix = path.suffix.lower()
-    if path.is_file() and suffix in _video_extensions():
+    if path.is_file() and suffix in VIDEO_EXTENSIONS:
         return [BatchInput(path.absolute(), _check_name(name or path.stem, origin), "video")]
     if not strict:
         log.info("%s: skipping %s (neither a video nor a folder)", origin, path)
         return []
-    if suffix in _image_extensions():
+    if suffix in IMAGE_EXTENSIONS:
         raise ValueError(f"{origin}: {path} is a single image; give the folder of the frames")
     raise ValueError(
-        f"{origin}: {path} is neither a video ({', '.join(sorted(_video_extensions()))}), "
+        f"{origin}: {path} is neither a video ({', '.join(sorted(VIDEO_EXTENSIONS))}), "
         f"a frame folder nor an input list ({', '.join(sorted(LIST_EXTENSIONS))})"
     )
-
-
-def _natural_key(text: str) -> tuple[list[object], str]:
-    parts = _DIGITS.split(text)  # text, digits, text, ...
-    return [int(p) if i % 2 else p.casefold() for i, p in enumerate(parts)], text
 
 
 def _natural(paths: list[str]) -> list[str]:
@@ -287,17 +274,12 @@ def probe_input(inp: BatchInput) -> InputProbe:
     ValueError, OSError
         When the video cannot be opened or the folder has no frames.
     """
-    from ..io import video
-
     if inp.kind == "folder":
-        files = video.list_frame_files(inp.path)
+        files = list_frame_files(inp.path)
         if not files:
             raise ValueError(f"{inp.path}: no image files in the folder")
         digest = hashlib.sha256("\n".join(_stat_key(f) for f in files).encode()).hexdigest()
         return InputProbe(len(files), tuple(str(f) for f in files), digest)
-    video_info = getattr(video, "video_info", None)
-    if video_info is None:  # pragma: no cover - until varflow.io.video provides it
-        raise ValueError("varflow.io.video.video_info is not available in this version")
     n_frames = int(video_info(inp.path).n_frames)
     if n_frames < 1:
         raise ValueError(f"{inp.path}: the video has no frames")
