@@ -154,20 +154,28 @@ def _params_block(page: Page, method: str | None, params: dict[str, Any] | None,
 # --------------------------------------------------------------------------- flows
 
 
+def _read_chosen(video: Video, chosen: Sequence[int],
+                 reader: Any) -> tuple[list[tuple[int, Any]], list[str]]:
+    """``(index, reader(file))`` for the chosen files of a video; unreadable ones are
+    logged and returned as ``"name: error"`` problems instead."""
+    loaded: list[tuple[int, Any]] = []
+    problems: list[str] = []
+    for i in chosen:
+        try:
+            loaded.append((i, reader(video.files[i])))
+        except (ValueError, OSError) as exc:
+            problems.append(f"{video.files[i].name}: {exc}")
+            logger.warning("report: cannot read %s: %s", video.files[i], exc)
+    return loaded, problems
+
+
 def _flow_thumbnails(page: Page, video: Video, max_frames: int) -> list[str]:
     """Thumbnails of a flow video; returns problems (unreadable files)."""
     from ..io import read_flow
     from ..viz.colorwheel import flow_to_color
 
-    problems: list[str] = []
     chosen = evenly_spaced(len(video.files), max_frames)
-    flows: list[tuple[int, np.ndarray]] = []
-    for i in chosen:
-        try:
-            flows.append((i, read_flow(video.files[i])))
-        except (ValueError, OSError) as exc:
-            problems.append(f"{video.files[i].name}: {exc}")
-            logger.warning("report: cannot read %s: %s", video.files[i], exc)
+    flows, problems = _read_chosen(video, chosen, read_flow)
     if not flows:
         page.para("No readable flow file.")
         return problems
@@ -311,16 +319,8 @@ def _trajectory_block(page: Page, traj: np.ndarray, ref: int, visibility: np.nda
 def _track_video(page: Page, video: Video, max_frames: int) -> list[str]:
     from ..io.trajectories import read_trajectories
 
-    problems: list[str] = []
-    n_windows = max(1, max_frames // 4)
-    chosen = evenly_spaced(len(video.files), n_windows)
-    loaded = []
-    for i in chosen:
-        try:
-            loaded.append((i, read_trajectories(video.files[i])))
-        except (ValueError, OSError) as exc:
-            problems.append(f"{video.files[i].name}: {exc}")
-            logger.warning("report: cannot read %s: %s", video.files[i], exc)
+    chosen = evenly_spaced(len(video.files), max(1, max_frames // 4))
+    loaded, problems = _read_chosen(video, chosen, read_trajectories)
     if not loaded:
         page.para("No readable trajectory window.")
         return problems
