@@ -266,7 +266,7 @@ def fusion_hook(candidate: np.ndarray, params: LargeDisplacementParams):
         cand = resize_flow(filled, (h, w))
         supported = resize_bilinear(known, (h, w))[..., 0] > 0.5
         weights = support_weights(i0, int(params.fusion_radius), float(params.fusion_gamma))
-        fused, choice = fuse(i0, i1, [flow, cand], weights, float(params.fusion_truncation))
+        _, choice = fuse(i0, i1, [flow, cand], weights, float(params.fusion_truncation))
         differ = np.hypot(*(cand - flow).transpose(2, 0, 1)) > params.fusion_threshold
         take = (choice == 1) & differ & supported
         fused = np.where(take[..., None], cand, flow).astype(np.float32)
