@@ -12,6 +12,8 @@ and the Numba kernel used by :func:`warp_bicubic`.
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -75,14 +77,25 @@ def warp_bicubic_numpy(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray
     return out, inside
 
 
+# Keys' polynomials with float32 coefficients (a = -0.5), so that the kernel's
+# arithmetic stays in float32
+_N2 = np.float32(_A + 2.0)
+_N3 = np.float32(_A + 3.0)
+_FA = np.float32(_A)
+_F5A = np.float32(5.0 * _A)
+_F8A = np.float32(8.0 * _A)
+_F4A = np.float32(4.0 * _A)
+_ONE = np.float32(1.0)
+
+
 @nb.njit(cache=True, inline="always")
 def _near(t):
-    return ((_A + 2.0) * t - (_A + 3.0)) * t * t + 1.0
+    return (_N2 * t - _N3) * t * t + _ONE
 
 
 @nb.njit(cache=True, inline="always")
 def _far(t):
-    return ((_A * t - 5.0 * _A) * t + 8.0 * _A) * t - 4.0 * _A
+    return ((_FA * t - _F5A) * t + _F8A) * t - _F4A
 
 
 # fast-math without the no-NaN/no-inf assumptions: NaN flows must be detected
@@ -92,51 +105,48 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
 def _warp_kernel(planes, flow, out, inside):
     h, w, k = planes.shape
+    f2 = np.float32(2.0)
     for i in nb.prange(h):
-        wx = np.empty(4, np.float32)
-        wy = np.empty(4, np.float32)
-        xs = np.empty(4, np.int64)
-        ys = np.empty(4, np.int64)
-        acc = np.empty(k, np.float32)
         for j in range(w):
-            x = j + flow[i, j, 0]
-            y = i + flow[i, j, 1]
+            x = np.float32(j) + flow[i, j, 0]
+            y = np.float32(i) + flow[i, j, 1]
             inside[i, j] = (x >= 0.0) and (x <= w - 1.0) and (y >= 0.0) and (y <= h - 1.0)
             if not (x == x and y == y):  # NaN flow: treat as outside
-                x = -2.0
-                y = -2.0
+                x = -f2
+                y = -f2
             # keep the far-away samples finite and bounded
-            x = min(max(x, -2.0), w + 1.0)
-            y = min(max(y, -2.0), h + 1.0)
-            fx0 = np.floor(x)
-            fy0 = np.floor(y)
+            x = min(max(x, -f2), np.float32(w + 1.0))
+            y = min(max(y, -f2), np.float32(h + 1.0))
+            fx0 = math.floor(x)
+            fy0 = math.floor(y)
             fx = x - fx0
             fy = y - fy0
-            wx[0] = _far(1.0 + fx)
-            wx[1] = _near(fx)
-            wx[2] = _near(1.0 - fx)
-            wx[3] = _far(2.0 - fx)
-            wy[0] = _far(1.0 + fy)
-            wy[1] = _near(fy)
-            wy[2] = _near(1.0 - fy)
-            wy[3] = _far(2.0 - fy)
-            ix0 = np.int64(fx0)
-            iy0 = np.int64(fy0)
-            for n in range(4):
-                xs[n] = min(max(ix0 + n - 1, 0), w - 1)
-                ys[n] = min(max(iy0 + n - 1, 0), h - 1)
-            # taps outer, channels inner: the K planes of a tap are contiguous
+            # the weights stay in scalars and the 4 x 4 taps are summed row by row
+            # (separably): no per-pixel arrays, every product in registers
+            wx0 = _far(_ONE + fx)
+            wx1 = _near(fx)
+            wx2 = _near(_ONE - fx)
+            wx3 = _far(f2 - fx)
+            wy0 = _far(_ONE + fy)
+            wy1 = _near(fy)
+            wy2 = _near(_ONE - fy)
+            wy3 = _far(f2 - fy)
+            ix0 = int(fx0)
+            iy0 = int(fy0)
+            x0 = min(max(ix0 - 1, 0), w - 1)
+            x1 = min(max(ix0, 0), w - 1)
+            x2 = min(max(ix0 + 1, 0), w - 1)
+            x3 = min(max(ix0 + 2, 0), w - 1)
+            r0 = planes[min(max(iy0 - 1, 0), h - 1)]
+            r1 = planes[min(max(iy0, 0), h - 1)]
+            r2 = planes[min(max(iy0 + 1, 0), h - 1)]
+            r3 = planes[min(max(iy0 + 2, 0), h - 1)]
             for c in range(k):
-                acc[c] = 0.0
-            for m in range(4):
-                ym = ys[m]
-                for n in range(4):
-                    wt = wy[m] * wx[n]
-                    xn = xs[n]
-                    for c in range(k):
-                        acc[c] += wt * planes[ym, xn, c]
-            for c in range(k):
-                out[i, j, c] = acc[c]
+                s0 = wx0 * r0[x0, c] + wx1 * r0[x1, c] + wx2 * r0[x2, c] + wx3 * r0[x3, c]
+                s1 = wx0 * r1[x0, c] + wx1 * r1[x1, c] + wx2 * r1[x2, c] + wx3 * r1[x3, c]
+                s2 = wx0 * r2[x0, c] + wx1 * r2[x1, c] + wx2 * r2[x2, c] + wx3 * r2[x3, c]
+                s3 = wx0 * r3[x0, c] + wx1 * r3[x1, c] + wx2 * r3[x2, c] + wx3 * r3[x3, c]
+                out[i, j, c] = wy0 * s0 + wy1 * s1 + wy2 * s2 + wy3 * s3
 
 
 def warp_bicubic(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
