@@ -9,7 +9,7 @@ from _problems import linearised_sparse_problem
 import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tvl1 import _row_blocks
+from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
 
 
 def aee(a, b):
@@ -61,7 +61,7 @@ def test_nesterov_decreases_the_smoothed_energy_monotonically_enough(aniso):
 
 def test_without_sparse_warps_it_is_tvl1():
     f0, f1, _ = synthetic_pair("smooth", shape=(64, 80), magnitude=2.0, seed=3)
-    a = varflow.flow(f0, f1, "tvl1")
+    a = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params())
     b = varflow.flow(f0, f1, "sparse-1d", sparse_warps=0)
     np.testing.assert_array_equal(a, b)
 

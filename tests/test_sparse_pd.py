@@ -7,7 +7,7 @@ from _problems import linearised_sparse_problem
 import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tvl1 import _row_blocks, tvl1_iterations
+from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks, tvl1_iterations
 
 LAM, THETA, TAU, TOL = 40.0, 0.3, 0.25, 0.0
 
@@ -107,7 +107,7 @@ def test_pd_solver_in_the_method():
     assert float(np.linalg.norm(flow - gt, axis=-1).mean()) < 0.10
     assert stats["sparse_warps"] > 0
     # w ≡ 0 with TV-L1's θ and ε: the sparse warps are TV-L1 warps (7 per level)
-    a = varflow.flow(f0, f1, "tvl1", n_warps=7)
+    a = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params(n_warps=7))
     b = varflow.flow(f0, f1, "sparse-1d", n_warps=5, sparse_warps=2, sparse_min_size=10,
                      combined_solver="primal-dual", sparse_weight=0.0, combined_coupling=0.3,
                      combined_tolerance=0.01, combined_iterations=50)

@@ -9,7 +9,7 @@ from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe import tensor as tensor_mod
 from varflow.twoframe.tensor import TensorParams, diffusion_tensor
-from varflow.twoframe.tvl1 import TVL1Params
+from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
 
 def aee(a, b):
@@ -46,7 +46,7 @@ def test_tensor_with_a_zero_is_exactly_identity():
 
 def test_identity_tensor_gives_the_isotropic_flow():
     f0, f1, _ = synthetic_pair("smooth", shape=(96, 128), magnitude=3.0, channels=3, seed=1)
-    iso = varflow.flow(f0, f1, "tvl1", edge_weight=10.0)
+    iso = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params(edge_weight=10.0))
     ident = varflow.flow(f0, f1, "tensor", tensor_a=0.0, edge_weight=10.0)
     # same iterations through the anisotropic branch of the kernel: rounding only
     assert np.abs(iso - ident).max() < 1e-3

@@ -8,7 +8,13 @@ import pytest
 import varflow
 from varflow.generators.pairs import TextureField, synthetic_pair
 from varflow.ops.warp import warp_bicubic
-from varflow.twoframe.tvl1 import TVL1Params, linearise, linearise_numpy, solve_warp
+from varflow.twoframe.tvl1 import (
+    PlainTVL1Params,
+    TVL1Params,
+    linearise,
+    linearise_numpy,
+    solve_warp,
+)
 
 
 def aee(a, b):
@@ -55,13 +61,27 @@ def test_grey_input_forms_agree():
 
 def test_colour_with_equal_channels_matches_grey_with_tripled_weight():
     f0, f1, _ = synthetic_pair("smooth", shape=(64, 80), magnitude=2.0, channels=1, seed=4)
-    grey = varflow.flow(f0, f1, data_weight=3 * TVL1Params().data_weight)
-    colour = varflow.flow(np.repeat(f0, 3, 2), np.repeat(f1, 3, 2))
+    plain = PlainTVL1Params()
+    grey = varflow.flow(f0, f1, params=plain.replace(data_weight=3 * plain.data_weight))
+    colour = varflow.flow(np.repeat(f0, 3, 2), np.repeat(f1, 3, 2), params=plain)
     assert aee(grey, colour) < 0.01
 
 
+def test_grey_option_works_on_the_channel_mean():
+    f0, f1, _ = synthetic_pair("smooth", shape=(64, 80), magnitude=2.0, channels=3, seed=4)
+    assert TVL1Params().grey
+    a = varflow.flow(f0, f1)
+    b = varflow.flow(np.mean(f0, axis=2, dtype=np.float32), np.mean(f1, axis=2, dtype=np.float32))
+    np.testing.assert_array_equal(a, b)
+    assert np.abs(varflow.flow(f0, f1, grey=False) - a).max() > 1e-3  # colour differs
+
+
 def test_colour_term_uses_chroma_not_grey_conversion():
-    """An isoluminant texture: its grey mean is constant, only colour carries motion."""
+    """An isoluminant texture: its grey mean is constant, only colour carries motion.
+
+    The colour term (``grey=False``) follows it; the default works on the channel
+    mean and cannot (the price of its speed: a third of the data-term work).
+    """
     h, w = 80, 96
     tex = TextureField(channels=1, seed=9)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
@@ -74,11 +94,12 @@ def test_colour_term_uses_chroma_not_grey_conversion():
     f0 = render(xx, yy)
     f1 = render(xx - shift[0], yy - shift[1])
     assert np.ptp(f0.mean(-1)) < 1e-6  # grey conversion loses everything
-    flow = varflow.flow(f0, f1)
+    flow = varflow.flow(f0, f1, params=PlainTVL1Params())
     gt = np.broadcast_to(shift, (h, w, 2))
     assert aee(flow, gt) < 0.1
-    grey = varflow.flow(f0.mean(-1), f1.mean(-1))
-    assert aee(grey, gt) > 1.5
+    assert aee(varflow.flow(f0, f1, grey=False), gt) < 0.1
+    assert aee(varflow.flow(f0.mean(-1), f1.mean(-1)), gt) > 1.5
+    assert aee(varflow.flow(f0, f1), gt) > 1.5
 
 
 def test_numba_and_numpy_engines_agree():
@@ -139,7 +160,7 @@ def test_invalid_parameter_names_the_field(field):
 def test_every_parameter_has_a_validity_test():
     # the booleans have no invalid value
     assert {f.name for f in dataclasses.fields(TVL1Params)} <= set(_BAD_VALUES) | {
-        "structure_texture", "sharpness_match", "gradient_grey"
+        "structure_texture", "sharpness_match", "gradient_grey", "grey"
     }
 
 
@@ -186,14 +207,14 @@ def test_fast_preset_does_less_work_and_stays_accurate():
     e_full = aee(varflow.flow(f0, f1, stats=full), gt)
     e_fast = aee(varflow.flow(f0, f1, "tvl1-fast", stats=fast), gt)
     assert fast["warps"] * 3 < full["warps"] and fast["levels"] < full["levels"]
-    assert e_fast < 0.08 and e_fast < 1.3 * e_full  # measured: 0.061 and 0.062
+    assert e_fast < 0.1 and e_fast < 1.3 * e_full  # measured: 0.085 and 0.086
 
 
 def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     from varflow.generators.photo_pairs import make_photo_pair
 
     p = make_photo_pair("affine", 1)
-    params = TVL1Params(noise_reference=0.01)
+    params = PlainTVL1Params(noise_reference=0.01)
     stats: dict = {}
     assert params.for_frames(p.frame0, p.frame1, stats) is params  # clean: unchanged
     assert stats["data_scale"] == 1.0 and stats["noise_sigma"] < 0.008
@@ -201,7 +222,7 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     noisy = [np.clip(f + rng.normal(0, 0.03, f.shape), 0, 1).astype(np.float32)
              for f in (p.frame0, p.frame1)]
     stats = {}
-    q = TVL1Params(noise_reference=0.01, gradient_weight=20.0).for_frames(*noisy, stats)
+    q = PlainTVL1Params(noise_reference=0.01, gradient_weight=20.0).for_frames(*noisy, stats)
     assert 0.026 < stats["noise_sigma"] < 0.034  # the added noise, not the texture
     assert q.data_weight == pytest.approx(40.0 * stats["data_scale"])
     assert q.gradient_weight == pytest.approx(20.0 * stats["data_scale"])
@@ -210,7 +231,7 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     errs = []
     for ref in (0.0, 0.01):
         st: dict = {}
-        flow = varflow.flow(*noisy, noise_reference=ref, stats=st)
+        flow = varflow.flow(*noisy, params=PlainTVL1Params(noise_reference=ref), stats=st)
         errs.append(float(np.linalg.norm(flow - p.flow, axis=-1)[p.valid].mean()))
         assert ("data_scale" in st) == (ref > 0)
     assert errs[1] < 0.6 * errs[0]

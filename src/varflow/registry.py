@@ -66,7 +66,8 @@ METHODS: dict[str, Method] = {
         name="tvl1",
         params=_tvl1.TVL1Params,
         solve_warp=_tvl1.solve_warp,
-        description="TV-L1 (colour L1 data term, edge-weighted TV, ROF texture, median)",
+        description="TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
+        "ROF texture, median)",
     ),
     "tvl1-fast": Method(
         name="tvl1-fast",

@@ -115,7 +115,7 @@ from ..twoframe.tvl1 import (
     _F0,
     _F1,
     _NO_TENSOR,
-    TVL1Params,
+    PlainTVL1Params,
     _data_prox_row,
     _dual_row,
     _ordered_sum,
@@ -157,7 +157,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class MultiFrameParams(TVL1Params):
+class MultiFrameParams(PlainTVL1Params):
     """Fields shared by the multi-frame methods (RLR, MFSF).
 
     The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` serve the two-frame

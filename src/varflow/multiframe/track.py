@@ -29,7 +29,7 @@ import numpy as np
 from .._validate import as_float_frames
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import _check
-from ..twoframe.tvl1 import TVL1Params, tvl1
+from ..twoframe.tvl1 import PlainTVL1Params, TVL1Params, tvl1
 
 __all__ = [
     "TrackCallback",
@@ -49,7 +49,7 @@ TrackCallback = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
-class TwoFrameTrackParams(TVL1Params):
+class TwoFrameTrackParams(PlainTVL1Params):
     """Parameters of the ``twoframe`` tracker: TV-L1 from the reference to every frame.
 
     All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.
@@ -57,7 +57,7 @@ class TwoFrameTrackParams(TVL1Params):
 
 
 @dataclass(frozen=True)
-class ChainTrackParams(TVL1Params):
+class ChainTrackParams(PlainTVL1Params):
     """Parameters of the ``chain`` tracker: TV-L1 between consecutive frames, composed.
 
     All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.

@@ -40,6 +40,7 @@ __all__ = [
     "coarse_to_fine",
     "coarse_to_fine_pyramids",
     "prepare_pyramid",
+    "working_channels",
     "ProgressCallback",
     "LevelHook",
 ]
@@ -100,6 +101,12 @@ class CoarseToFineParams:
         than :data:`varflow.ops.sharpness.SHARPNESS_TOLERANCE` in log units (one frame
         motion-blurred or out of focus); pairs of equal sharpness are untouched.
         Two-frame methods only (:func:`coarse_to_fine`).  Default False.
+    grey : bool
+        Work on the mean of the colour channels (one channel, as DeepFlow does)
+        instead of one data residual per channel: about a third of the data-term
+        work per iteration.  Applied before everything else, the noise rule and
+        the sharpness match included (:func:`working_channels`).  Default False
+        (``tvl1`` sets it).
     """
 
     scale_factor: float = 0.8
@@ -113,6 +120,7 @@ class CoarseToFineParams:
     rof_iterations: int = 50
     pyramid_sigma: float = 0.6
     sharpness_match: bool = False
+    grey: bool = False
 
     def __post_init__(self) -> None:
         _check(
@@ -176,6 +184,15 @@ class WarpSolver(Protocol):
     ) -> np.ndarray: ...
 
 
+def working_channels(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
+    """The channels a method works on: the frame itself, or with ``params.grey`` the
+    mean of its channels, ``(H, W, 1)`` float32 (a one-channel frame is returned as is).
+    """
+    if not params.grey or image.shape[2] == 1:
+        return image
+    return np.mean(image, axis=2, keepdims=True, dtype=np.float32)
+
+
 def preprocess(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
     """Apply the configured pre-processing to an ``(H, W, C)`` float image."""
     if params.structure_texture:
@@ -189,6 +206,8 @@ def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
                     shapes: list[tuple[int, int]] | None = None) -> list[np.ndarray]:
     """Pre-process one ``(H, W, C)`` float frame and build its pyramid (finest first).
 
+    With ``params.grey`` the frame is first reduced to the mean of its channels.
+
     The inputs of :func:`coarse_to_fine_pyramids`; a multi-frame method builds each
     frame's pyramid once and pairs it with several others.
 
@@ -201,8 +220,9 @@ def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
 
     Returns
     -------
-    list of ndarray, each (h, w, C) float32
+    list of ndarray, each (h, w, C) float32 (C = 1 with ``params.grey``)
     """
+    frame = working_channels(frame, params)
     if shapes is None:
         shapes = pyramid_shapes(frame.shape[:2], params.max_levels, params.scale_factor,
                                 params.min_size)
@@ -256,6 +276,7 @@ def coarse_to_fine(
     I0, I1 = check_pair(frame0, frame1)
     t_start = time.perf_counter()
     stats = {} if stats is None else stats
+    I0, I1 = working_channels(I0, params), working_channels(I1, params)
     params = params.for_frames(I0, I1, stats)
     if params.sharpness_match:
         I0, I1, sigma0, sigma1 = match_sharpness(I0, I1)

@@ -59,7 +59,7 @@ from ..ops.interpolation import InterpParams, interpolate
 from ..ops.matching import MatchParams, match
 from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image_fast
 from .coarse_to_fine import ProgressCallback, _check, coarse_to_fine
-from .tvl1 import TVL1Params, solve_warp
+from .tvl1 import PlainTVL1Params, solve_warp
 
 __all__ = ["LargeDisplacementParams", "fusion_hook", "matching_flow", "tvl1_ld"]
 
@@ -67,7 +67,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class LargeDisplacementParams(TVL1Params):
+class LargeDisplacementParams(PlainTVL1Params):
     """Parameters of ``tvl1-ld`` (every :class:`TVL1Params` field too).
 
     Defaults were chosen on the tuning split of the large-motion generator

@@ -32,13 +32,13 @@ from scipy import ndimage
 
 from ..ops.differences import image_derivatives
 from .coarse_to_fine import _check
-from .tvl1 import TVL1Params, edge_weight, init_level_state, run_warp
+from .tvl1 import PlainTVL1Params, edge_weight, init_level_state, run_warp
 
 __all__ = ["TensorParams", "diffusion_tensor", "init_tensor_level", "solve_warp"]
 
 
 @dataclass(frozen=True)
-class TensorParams(TVL1Params):
+class TensorParams(PlainTVL1Params):
     """Parameters of tensor-directed TV-L1 (all fields of :class:`TVL1Params` too).
 
     Attributes
