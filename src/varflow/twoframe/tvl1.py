@@ -228,8 +228,8 @@ class PlainTVL1Params(TVL1Params):
     α = 0.65, at most 50 iterations, no gradient term, no Huber-TV, no sharpness
     match, no noise rule, colour channels), tuned on Middlebury.  The methods built
     on that energy, whose tables were measured with it, start from here: the
-    tensor-directed and sparse methods, the trackers, RLR/MFSF and ``tvl1-ld``.
-    Every field is that of :class:`TVL1Params`.
+    tensor-directed and sparse methods, the trackers and RLR/MFSF.  Every field
+    is that of :class:`TVL1Params`.
     """
 
     data_weight: float = 40.0
