@@ -79,8 +79,8 @@ class TVL1Params(CoarseToFineParams):
     """Parameters of TV-L1 (all pyramid fields of :class:`CoarseToFineParams` too).
 
     Intensities are in [0, 1]; flows in pixels.  The defaults are those of the
-    ``tvl1`` method (issue 11): the grey channel mean, a colour term of weight λ =
-    15 beside a gradient-constancy term of weight γ = 140, Huber-TV, texture α =
+    ``tvl1`` method (issue 11): the grey channel mean, a brightness-constancy term of
+    weight λ = 15 beside a gradient-constancy term of weight γ = 140, Huber-TV, texture α =
     0.3, the sharpness match and the noise rule, chosen on the photographic tuning
     split and Middlebury (benchmarks/README.md).  The methods built on the book's
     plain energy (colour term and TV only) start from :class:`PlainTVL1Params`.
@@ -146,7 +146,8 @@ class TVL1Params(CoarseToFineParams):
         the data weights λ and γ are multiplied by σ_0/σ̂ (a stronger
         regulariser where the data are noisier); σ̂ is the mean over the two frames
         of :func:`varflow.ops.fusion.noise_sigma_flat` (Immerkær's estimator on the
-        flattest tiles), read before any pre-processing.  0 turns it off.
+        flattest tiles), read on the channels the method works on (the grey mean
+        with ``grey``) before any other pre-processing.  0 turns it off.
         Default 0.01.
     texture_alpha : float
         α of the structure-texture blend ``I - α ROF(I)``, in [0, 1].  Default 0.3
