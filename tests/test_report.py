@@ -34,6 +34,7 @@ from PIL import Image
 
 import varflow
 from varflow import cli
+from varflow.batch.manifest import MANIFEST_NAME, Manifest
 from varflow.evaluation.bench import write_csv
 from varflow.io import write_flo, write_image, write_kitti_png
 from varflow.io.trajectories import write_trajectories
@@ -206,18 +207,15 @@ def make_batch(root: Path, manifest: bool = True) -> Path:
                   "rlr", json.dumps({"rank": 4}), "0.1.0", "clipB/window_000000.npz", "x",
                   "done", None, 12.0, 1, 0.0))
     if manifest:
-        con = sqlite3.connect(root / "manifest.sqlite")
-        con.execute("CREATE TABLE tasks(task_id TEXT PRIMARY KEY, input TEXT, name TEXT, "
-                    "kind TEXT, frames TEXT, method TEXT, params TEXT, version TEXT, "
-                    "output TEXT, checksum TEXT, status TEXT, error TEXT, seconds REAL, "
-                    "attempts INTEGER, updated REAL)")
-        con.execute("CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT)")
-        con.executemany("INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", tasks)
-        con.executemany("INSERT INTO meta VALUES (?, ?)",
-                        [("stride", "1"), ("created_by", "varflow batch <test>")])
-        con.commit()
-        con.close()
+        write_manifest(root, tasks, [("stride", "1"), ("created_by", "varflow batch <test>")])
     return root
+
+
+def write_manifest(root: Path, tasks: list[tuple], meta: list[tuple[str, str]]) -> None:
+    """``root/manifest.sqlite`` with the batch runner's own schema, holding these rows."""
+    with Manifest(root / MANIFEST_NAME) as man:
+        man.conn.executemany("INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", tasks)
+        man.conn.executemany("INSERT INTO meta VALUES (?, ?)", meta)
 
 
 @pytest.fixture
@@ -356,23 +354,14 @@ def test_batch_pairs_running_and_failed_input(
     write_flo(root / "pairs" / "000000_000005.flo", uniform(8, 8, 1.0, 0.0))
     write_flo(root / "pairs" / "000002_000003.flo", uniform(8, 8, 0.5, 0.0))
     (root / "pairs" / ".000004_000009.flo.abc.tmp").write_bytes(b"partial")  # atomic write
-    con = sqlite3.connect(root / "manifest.sqlite")
-    con.execute("CREATE TABLE tasks(task_id TEXT PRIMARY KEY, input TEXT, name TEXT, "
-                "kind TEXT, frames TEXT, method TEXT, params TEXT, version TEXT, "
-                "output TEXT, checksum TEXT, status TEXT, error TEXT, seconds REAL, "
-                "attempts INTEGER, updated REAL)")
-    con.execute("CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT)")
-    con.executemany("INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", [
+    write_manifest(root, [
         ("pairs/000000_000005.flo", "a.mp4", "pairs", "flow", "[0, 5]", "tvl1", "{}", "0.1",
          "pairs/000000_000005.flo", "x", "done", None, 1.0, 1, 0.0),
         ("pairs/000004_000009.flo", "a.mp4", "pairs", "flow", "[4, 9]", "tvl1", "{}", "0.1",
          "pairs/000004_000009.flo", None, "running", None, None, 1, 0.0),
         ("broken/input", "b.mp4", "broken", "flow", "[]", "tvl1", "{}", "0.1", None, None,
          "failed", "cannot open b.mp4: invalid data", None, 0, 0.0),
-    ])
-    con.execute("INSERT INTO meta VALUES ('updated', '1764500000.0')")
-    con.commit()
-    con.close()
+    ], [("updated", "1764500000.0")])
     out = tmp_path / "r.html"
     rc, _, err = run(capsys, "report", root, "-o", out)
     assert rc == 0, err
