@@ -15,7 +15,6 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-import av
 import numpy as np
 import pytest
 
@@ -32,7 +31,7 @@ from varflow.batch import (
 from varflow.batch.manifest import Manifest
 from varflow.io.flo import write_flo
 from varflow.io.trajectories import read_trajectories
-from varflow.io.video import read_frames
+from varflow.io.video import read_frames, write_video
 from varflow.registry import get_method, make_params
 
 H, W = 32, 48
@@ -52,15 +51,8 @@ def make_video(path: Path, n_frames: int = 5, seed: int = 0) -> Path:
     from scipy.ndimage import uniform_filter
 
     texture = (255 * uniform_filter(texture, size=(3, 3, 1))).astype(np.uint8)
-    with av.open(str(path), "w") as container:
-        stream = container.add_stream("ffv1", rate=10)
-        stream.width, stream.height, stream.pix_fmt = W, H, "bgr0"
-        for k in range(n_frames):
-            img = np.ascontiguousarray(texture[2:2 + H, k:k + W])
-            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                container.mux(packet)
-        for packet in stream.encode():
-            container.mux(packet)
+    write_video(path, (texture[2:2 + H, k:k + W] for k in range(n_frames)), 10,
+                codec="ffv1", pix_fmt="bgr0")
     return path
 
 
