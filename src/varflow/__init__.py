@@ -177,9 +177,10 @@ def flow(
         scaled jointly, with one affine map, from their common range [min, max]
         to [0, 1], so the flow does not change under ``a * I + b`` applied to
         both frames; constant frames give zero flow.  NaN or inf raises a
-        ValueError naming the frame (``"frame1: ..."``).  Colour frames use a
-        vector-valued data term (one residual per channel), not a conversion to
-        grey.
+        ValueError naming the frame (``"frame1: ..."``).  ``tvl1`` works on the
+        mean of the colour channels by default (``grey``); with ``grey=False``,
+        and in the methods built on the plain energy, colour frames use a
+        vector-valued data term (one residual per channel).
     method : str
         A name from :func:`methods`.
     params : dataclass, optional

@@ -1225,7 +1225,8 @@ def split_cases(split: str, families: Sequence[str], known: Sequence[str],
                 splits: Mapping[str, Sequence[int]] | None = None) -> list[tuple[str, int]]:
     """The ``(family, seed)`` cases of a split for any family list, family-major.
 
-    Shared by :func:`photo_cases` and :func:`varflow.generators.photo_pairs.photo_pair_cases`.
+    Shared by :func:`photo_cases`, :func:`varflow.generators.photo_pairs.photo_pair_cases`
+    and :func:`varflow.generators.large_pairs.large_pair_cases`.
 
     Parameters
     ----------

@@ -731,7 +731,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     _linearise_kernel(f32[0], f32[1], f32[2], f32[3], inside, f32[4], ix[:nc], iy[:nc], a[:nc])
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
-        _, gdx, gdy, w_grad = _gradient_inputs(f32[0], f32[2], f32[3], params)
+        gdx, gdy, w_grad = _gradient_inputs(f32[2], f32[3], params)
         sigma, (i0x, i0y) = _reference_gradients(f32[0], params, state)
         j1 = smooth_image_fast(np.concatenate([gdx, gdy], axis=2), sigma)
         _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, nc, ix, iy, a)
@@ -762,18 +762,17 @@ def _gradient_channels(params: TVL1Params, nc: int) -> int:
     return 1 if params.gradient_grey else nc
 
 
-def _gradient_inputs(I0, I1w_dx, I1w_dy, params: TVL1Params):
-    """``(I0, ∂x I1w, ∂y I1w, γ/λ)`` as the gradient term sees them.
+def _gradient_inputs(dx, dy, params: TVL1Params):
+    """``(∂x I, ∂y I, γ/λ)`` as the gradient term sees the ``(H, W, C)`` derivatives.
 
     With ``gradient_grey`` the channel means, and the weight times ``C``.
     """
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if not params.gradient_grey:
-        return I0, I1w_dx, I1w_dy, w_grad
-    nc = I0.shape[2]
-    grey = [np.ascontiguousarray(x.mean(axis=2, keepdims=True), np.float32)
-            for x in (I0, I1w_dx, I1w_dy)]
-    return grey[0], grey[1], grey[2], np.float32(w_grad * nc)
+        return dx, dy, w_grad
+    nc = dx.shape[2]
+    grey = [np.ascontiguousarray(x.mean(axis=2, keepdims=True), np.float32) for x in (dx, dy)]
+    return grey[0], grey[1], np.float32(w_grad * nc)
 
 
 def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "numba"):
@@ -793,7 +792,7 @@ def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "num
             planes = derivative_planes(I0)
         else:
             planes = derivative_planes_numpy(I0)
-        _, dx, dy, _ = _gradient_inputs(I0, planes[..., nc:2 * nc], planes[..., 2 * nc:], params)
+        dx, dy, _ = _gradient_inputs(planes[..., nc:2 * nc], planes[..., 2 * nc:], params)
         g = dx.shape[2]
         both = np.concatenate([dx, dy], axis=2)
         j0 = smooth_image_fast(both, sigma) if engine == "numba" else smooth_image(both, sigma)
@@ -851,7 +850,7 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
     nc = I0.shape[2]
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
-        _, gdx, gdy, w_grad = _gradient_inputs(I0, I1w_dx, I1w_dy, params)
+        gdx, gdy, w_grad = _gradient_inputs(I1w_dx, I1w_dy, params)
         sigma, (i0x, i0y) = _reference_gradients(np.asarray(I0, np.float32), params, state,
                                                  engine="numpy")
         j1x = smooth_image(gdx, sigma)
