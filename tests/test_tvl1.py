@@ -235,3 +235,17 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
         errs.append(float(np.linalg.norm(flow - p.flow, axis=-1)[p.valid].mean()))
         assert ("data_scale" in st) == (ref > 0)
     assert errs[1] < 0.6 * errs[0]
+
+
+def test_dual_projection_kernel_matches_the_numpy_projection():
+    from varflow.ops.prox import project_l2_ball
+    from varflow.twoframe.tvl1 import _project_dual
+
+    rng = np.random.default_rng(7)
+    p = rng.normal(0, 1, (4, 23, 31)).astype(np.float32)
+    g = rng.uniform(0.05, 1.0, (23, 31)).astype(np.float32)
+    want = project_l2_ball(np.moveaxis(p, 0, -1).reshape(23, 31, 2, 2), g[..., None])
+    got = p.copy()
+    _project_dual(got, g)
+    np.testing.assert_allclose(np.moveaxis(got, 0, -1).reshape(23, 31, 2, 2), want, atol=1e-6)
+    assert (np.abs(got - p) > 1e-3).any()  # some pairs were outside their ball

@@ -134,18 +134,20 @@ def median_filter_flow(flow: np.ndarray, size: int = 5) -> np.ndarray:
     Returns
     -------
     ndarray, shape (H, W, K), float32
+        For ``size`` 5, a view of planar ``(K, H, W)`` data (not C-contiguous).
     """
     if size < 1 or size % 2 == 0:
         raise ValueError(f"median size must be a positive odd integer, got {size}")
+    if size == 5:
+        # planar in and out; a flow that is a view of planar data (the TV-L1 solvers
+        # return one) is read without a copy, and the result is such a view too
+        planar = np.ascontiguousarray(np.moveaxis(flow, -1, 0), dtype=np.float32)
+        res = np.empty_like(planar)
+        _median5_kernel(planar, res)
+        return np.moveaxis(res, 0, -1)
     src = np.ascontiguousarray(flow, dtype=np.float32)
     if size == 1:
         return src.copy()
     out = np.empty_like(src)
-    if size == 5:
-        planar = np.ascontiguousarray(np.moveaxis(src, -1, 0))
-        res = np.empty_like(planar)
-        _median5_kernel(planar, res)
-        return np.ascontiguousarray(np.moveaxis(res, 0, -1))
-    else:
-        _median_kernel(src, out, size)
+    _median_kernel(src, out, size)
     return out

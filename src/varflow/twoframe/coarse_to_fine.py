@@ -363,4 +363,4 @@ def coarse_to_fine_pyramids(
     seconds = time.perf_counter() - t_start
     stats.update(levels=n_levels, warps=total, seconds=seconds)
     log.debug("coarse_to_fine: %d levels, %d warps in %.3fs", n_levels, total, seconds)
-    return flow
+    return np.ascontiguousarray(flow, dtype=np.float32)

@@ -57,7 +57,7 @@ from ..ops.differences import (
     stencil5_indices,
 )
 from ..ops.fusion import noise_sigma_flat
-from ..ops.prox import project_l2_ball, prox_huber_conjugate, prox_linear_l1
+from ..ops.prox import prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear, smooth_image, smooth_image_fast
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
 
@@ -562,6 +562,22 @@ def tvl1_iterations_numpy(
     return it
 
 
+@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def _project_dual(p, g):
+    """Project the dual TV pairs ``(p[2k], p[2k+1])`` of planar ``(4, H, W)`` ``p`` onto
+    the balls of radius ``g`` (H, W), in place (the dual step's projection)."""
+    _, h, w = p.shape
+    for i in nb.prange(h):
+        for k in range(2):
+            pxr = p[2 * k, i]
+            pyr = p[2 * k + 1, i]
+            gr = g[i]
+            for j in range(w):
+                px, py = _project(pxr[j], pyr[j], gr[j])
+                pxr[j] = px
+                pyr[j] = py
+
+
 def init_level_state(
     state: dict, shape: tuple[int, int, int], g: np.ndarray, tensor: np.ndarray | None = None
 ) -> None:
@@ -586,9 +602,8 @@ def init_level_state(
     state["tensor"] = None if tensor is None else np.ascontiguousarray(tensor, dtype=np.float32)
     prev = state.get("previous") or {}
     if "p" in prev:
-        p = resize_bilinear(np.moveaxis(prev["p"], 0, -1), (h, w)).reshape(h, w, 2, 2)
-        p = project_l2_ball(p, state["g"][..., None]).reshape(h, w, 4)
-        p = np.ascontiguousarray(np.moveaxis(p, -1, 0), dtype=np.float32)
+        p = planar(resize_bilinear(np.moveaxis(prev["p"], 0, -1), (h, w)))
+        _project_dual(p, state["g"])
     else:
         p = np.zeros((4, h, w), np.float32)
     state["p"] = p
@@ -895,7 +910,7 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
-    u = planar(flow0)
+    u = np.array(np.moveaxis(flow0, -1, 0), dtype=np.float32, order="C")  # a copy, always
     tens, aniso = kernel_tensor(state)
     nc = state["q"].shape[0]
     if ix.shape[0] == nc:
@@ -918,7 +933,7 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
         state["q"][...] = q[:nc]
         state["q_extra"] = np.ascontiguousarray(q[nc:])
     state["iterations"] = state.get("iterations", 0) + n
-    return np.ascontiguousarray(np.moveaxis(u, 0, -1))
+    return np.moveaxis(u, 0, -1)  # a view: the driver's median reads it planar, uncopied
 
 
 def solve_warp(
