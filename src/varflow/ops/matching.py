@@ -271,11 +271,13 @@ def _triangle_taps(cell_size: int) -> np.ndarray:
     return (k / k.sum()).astype(np.float32)
 
 
-def _orientation_planes(lum: np.ndarray, p: MatchParams) -> np.ndarray:
+def _orientation_planes(lum: np.ndarray, p: MatchParams, engine: str = "numpy") -> np.ndarray:
     """Spatially binned orientation planes, ``(H, W, orientations)`` float32.
 
     Gradient magnitude split between the two nearest of ``orientations`` bins over
-    ``[0, 2π)``, then filtered with the separable triangle of :func:`_triangle_taps`.
+    ``[0, 2π)``, then filtered with the separable triangle of :func:`_triangle_taps`
+    (edge values repeated).  ``engine="numba"`` bins and filters in
+    :func:`_bin_filter_kernel`, bit-identical to the SciPy filters of the reference.
     """
     g = lum
     if p.gradient_sigma > 0:
@@ -289,6 +291,11 @@ def _orientation_planes(lum: np.ndarray, p: MatchParams) -> np.ndarray:
     b0 = np.floor(b)
     f = (b - b0).astype(np.float32)
     b0 = b0.astype(np.int64) % n
+    taps = _triangle_taps(p.cell_size)
+    if engine == "numba":
+        out = np.empty(lum.shape + (n,), np.float32)
+        _bin_filter_kernel(mag, f, b0, taps, out)
+        return out
     b1 = (b0 + 1) % n
     h, w = lum.shape
     planes = np.zeros((h * w, n), np.float32)
@@ -296,10 +303,74 @@ def _orientation_planes(lum: np.ndarray, p: MatchParams) -> np.ndarray:
     planes[idx, b0.ravel()] = (mag * (1.0 - f)).ravel()
     planes[idx, b1.ravel()] = (mag * f).ravel()  # b1 != b0: no overlap
     planes = planes.reshape(h, w, n)
-    taps = _triangle_taps(p.cell_size)
     planes = ndimage.correlate1d(planes, taps, axis=0, mode="nearest")
     planes = ndimage.correlate1d(planes, taps, axis=1, mode="nearest")
     return np.ascontiguousarray(planes, dtype=np.float32)
+
+
+@nb.njit(cache=True, parallel=True)
+def _bin_filter_kernel(mag, frac, b0, taps, out):
+    """Orientation binning and the separable triangle filter of :func:`_orientation_planes`.
+
+    ``mag``, ``frac`` (float32) and ``b0`` (int64, in ``[0, n)``) are ``(H, W)``: pixel
+    ``(i, j)`` puts ``mag (1 - frac)`` in bin ``b0`` and ``mag frac`` in bin
+    ``b0 + 1 (mod n)``.  ``taps`` is symmetric, of odd length ``2r + 1``.  Each pass
+    sums in float64 in the order of ``scipy.ndimage.correlate1d`` for a symmetric
+    filter (centre tap, then the pairs from the outermost in) and rounds to float32,
+    so ``out`` ``(H, W, n)`` equals the reference bit for bit.  Rows are in parallel;
+    the flattened ``(W · n)`` rows make the inner loops contiguous.
+    """
+    h, w, n = out.shape
+    r = taps.shape[0] // 2
+    m = w * n
+    raw = np.empty((h, m), np.float32)
+    tmp = np.empty((h, m), np.float32)
+    res = out.reshape(h, m)
+    one = np.float32(1.0)
+    t = taps.astype(np.float64)
+    for i in nb.prange(h):
+        row = raw[i]
+        for q in range(m):
+            row[q] = 0.0
+        for j in range(w):
+            k = b0[i, j]
+            k1 = k + 1 if k + 1 < n else 0
+            row[j * n + k] = mag[i, j] * (one - frac[i, j])
+            row[j * n + k1] = mag[i, j] * frac[i, j]
+    for i in nb.prange(h):  # vertical pass
+        c = raw[i]
+        acc = np.empty(m, np.float64)
+        for q in range(m):
+            acc[q] = np.float64(c[q]) * t[r]
+        for s in range(r, 0, -1):
+            a = raw[max(i - s, 0)]
+            b = raw[min(i + s, h - 1)]
+            ts = t[r - s]
+            for q in range(m):
+                acc[q] += (np.float64(a[q]) + np.float64(b[q])) * ts
+        dst = tmp[i]
+        for q in range(m):
+            dst[q] = np.float32(acc[q])
+    lo = min(r, w) * n  # horizontal pass: interior columns need no clamping
+    hi = max(w - r, lo // n) * n
+    for i in nb.prange(h):
+        c = tmp[i]
+        dst = res[i]
+        for q in range(lo, hi):
+            v = np.float64(c[q]) * t[r]
+            for s in range(r, 0, -1):
+                v += (np.float64(c[q - s * n]) + np.float64(c[q + s * n])) * t[r - s]
+            dst[q] = np.float32(v)
+        for j in range(w):
+            if lo <= j * n < hi:
+                continue
+            for o in range(n):
+                v = np.float64(c[j * n + o]) * t[r]
+                for s in range(r, 0, -1):
+                    a = c[max(j - s, 0) * n + o]
+                    b = c[min(j + s, w - 1) * n + o]
+                    v += (np.float64(a) + np.float64(b)) * t[r - s]
+                dst[j * n + o] = np.float32(v)
 
 
 def _cell_layout(p: MatchParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -348,42 +419,72 @@ def _describe_numpy(planes: np.ndarray, dy: np.ndarray, dx: np.ndarray, wt: np.n
     return q.astype(np.uint8)
 
 
+#: Pixels per work item of :func:`_describe_kernel`: its ``dims × _DESC_BLOCK``
+#: float32 buffer (16 KiB for 128 dimensions) stays in the L1 cache.
+_DESC_BLOCK = 32
+
+
 @nb.njit(cache=True, parallel=True)
-def _describe_kernel(planes, dy, dx, wt, clip, eps, quant, out):
-    h, w, n = planes.shape
+def _describe_kernel(planar, dy, dx, wt, clip, eps, quant, out):
+    """Descriptors of :func:`_describe_numpy` from the planar ``(n, H, W)`` planes.
+
+    Work items are runs of ``_DESC_BLOCK`` pixels of a row; the loops run along the
+    pixels of the run (contiguous, vectorised) with the per-pixel operations and
+    summation order of the reference, so the bytes are identical.
+    """
+    n, h, w = planar.shape
     nc = dy.shape[0]
     d = nc * n
     one = np.float32(1.0)
     half = np.float32(0.5)
     top = np.float32(255.0)
-    for i in nb.prange(h):
-        v = np.empty(d, np.float32)
-        acc = np.empty(n, np.float32)
-        for j in range(w):
-            for rep in range(2):
+    blk = _DESC_BLOCK
+    nblk = (w + blk - 1) // blk
+    for item in nb.prange(h * nblk):
+        i = item // nblk
+        j0 = (item - i * nblk) * blk
+        m = min(blk, w - j0)
+        v = np.empty((d, blk), np.float32)
+        acc = np.empty((n, blk), np.float32)
+        s = np.empty(blk, np.float32)
+        for c in range(nc):
+            yi = min(max(i + dy[c], 0), h - 1)
+            off = dx[c]
+            wc = wt[c]
+            inner = j0 + off >= 0 and j0 + m - 1 + off <= w - 1
+            for o in range(n):
+                src = planar[o, yi]
+                dst = v[c * n + o]
+                if inner:
+                    for j in range(m):
+                        dst[j] = wc * src[j0 + j + off]
+                else:
+                    for j in range(m):
+                        dst[j] = wc * src[min(max(j0 + j + off, 0), w - 1)]
+        for rep in range(2):  # normalise, clip, normalise again
+            for o in range(n):
+                for j in range(m):
+                    acc[o, j] = 0.0
+            for c in range(nc):
                 for o in range(n):
-                    acc[o] = 0.0
-                for c in range(nc):
-                    if rep == 0:
-                        yi = min(max(i + dy[c], 0), h - 1)
-                        xi = min(max(j + dx[c], 0), w - 1)
-                        wc = wt[c]
-                        for o in range(n):
-                            v[c * n + o] = wc * planes[yi, xi, o]
-                    for o in range(n):
-                        val = v[c * n + o]
-                        acc[o] += val * val
-                s = np.float32(0.0)
-                for o in range(n):
-                    s += acc[o]
-                inv = one / (np.sqrt(s) + eps)
-                for k in range(d):
-                    v[k] = v[k] * inv
-                if rep == 0:
-                    for k in range(d):
-                        v[k] = min(v[k], clip)
+                    for j in range(m):
+                        acc[o, j] += v[c * n + o, j] * v[c * n + o, j]
+            for j in range(m):
+                s[j] = 0.0
+            for o in range(n):
+                for j in range(m):
+                    s[j] += acc[o, j]
+            for j in range(m):
+                s[j] = one / (np.sqrt(s[j]) + eps)
             for k in range(d):
-                out[i, j, k] = np.uint8(min(np.floor(v[k] * quant + half), top))
+                for j in range(m):
+                    v[k, j] = v[k, j] * s[j]
+                if rep == 0:
+                    for j in range(m):
+                        v[k, j] = min(v[k, j], clip)
+        for j in range(m):
+            for k in range(d):
+                out[i, j0 + j, k] = np.uint8(min(np.floor(v[k, j] * quant + half), top))
 
 
 def _describe_planes(planes: np.ndarray, p: MatchParams, engine: str,
@@ -398,7 +499,8 @@ def _describe_planes(planes: np.ndarray, p: MatchParams, engine: str,
     h, w, _ = planes.shape
     if out is None:
         out = np.empty((h, w, p.dims), np.uint8)
-    _describe_kernel(planes, dy, dx, wt, np.float32(p.clip), _NORM_EPS, _QUANT, out)
+    planar = np.ascontiguousarray(planes.transpose(2, 0, 1))
+    _describe_kernel(planar, dy, dx, wt, np.float32(p.clip), _NORM_EPS, _QUANT, out)
     return out
 
 
@@ -424,7 +526,7 @@ def descriptors(image: np.ndarray, params: MatchParams | None = None,
     _check_engine(engine)
     p = MatchParams() if params is None else params
     img = as_float_image(image, "image")
-    return _describe_planes(_orientation_planes(_luminance(img), p), p, engine)
+    return _describe_planes(_orientation_planes(_luminance(img), p, engine), p, engine)
 
 
 # ------------------------------------------------------------------------------ seeds
@@ -823,7 +925,7 @@ def match(frame0: np.ndarray, frame1: np.ndarray, params: MatchParams | None = N
         t0 = time.perf_counter()
         desc = np.empty((2, hl, wl, p.dims), np.uint8)
         for k in range(2):
-            planes = _orientation_planes(pyr[k][lev][..., 0], p)
+            planes = _orientation_planes(pyr[k][lev][..., 0], p, engine)
             _describe_planes(planes, p, engine, out=desc[k])
         t1 = time.perf_counter()
         step_l = p.step if lev == 0 else _level_step(p.step, (h, w), (hl, wl))
