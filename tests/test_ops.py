@@ -208,9 +208,10 @@ def test_rof_engines_agree_and_reduce_tv():
     np.testing.assert_allclose(structure_texture(const, 0.95), 0.02, atol=1e-6)
 
 
+@pytest.mark.parametrize("shape", [(23, 31, 4), (5, 3, 2), (1, 1, 1)])
 @pytest.mark.parametrize("sigma", [0.0, 0.4, 1.0, 2.5])
-def test_smoothing_engines_agree(sigma):
-    img = np.random.default_rng(12).random((23, 31, 4), dtype=np.float32)
+def test_smoothing_engines_agree(sigma, shape):
+    img = np.random.default_rng(12).random(shape, dtype=np.float32)
     fast = smooth_image_fast(img, sigma)
     ref = smooth_image(img, sigma)
     assert fast.shape == img.shape and fast.dtype == np.float32 and ref.dtype == np.float32
@@ -218,7 +219,7 @@ def test_smoothing_engines_agree(sigma):
     if sigma == 0:
         assert ref is img
         np.testing.assert_array_equal(fast, img)
-    else:  # a smoothing: the variance drops
+    elif img.size > 1:  # a smoothing: the variance drops
         assert fast.var() < 0.9 * img.var()
 
 

@@ -115,28 +115,46 @@ def _gaussian_taps(sigma: float) -> np.ndarray:
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
 def _smooth_kernel(x, taps, out):
-    """Separable smoothing of the rows and columns of (H, W, K), edges replicated."""
+    """Separable smoothing of the rows and columns of (H, W, K), edges replicated.
+
+    The rows are read as flat ``W · K`` arrays: away from the left and right edges
+    the row pass needs no clamping, and both passes run along contiguous memory.
+    """
     h, w, k = x.shape
     r = taps.shape[0] // 2
-    tmp = np.empty_like(x)
+    m = w * k
+    xf = x.reshape(h, m)
+    of = out.reshape(h, m)
+    tmp = np.empty((h, m), np.float32)
+    lo = min(r, w) * k  # flat indices lo..hi-1: columns r..w-r-1
+    hi = max(w - r, lo // k) * k
     for i in nb.prange(h):
+        src = xf[i]
+        dst = tmp[i]
+        for q in range(lo, hi):
+            acc = np.float32(0.0)
+            for t in range(2 * r + 1):
+                acc += taps[t] * src[q + (t - r) * k]
+            dst[q] = acc
         for j in range(w):
+            if lo <= j * k < hi:
+                continue
             for c in range(k):
                 acc = np.float32(0.0)
                 for t in range(-r, r + 1):
                     jj = min(max(j + t, 0), w - 1)
-                    acc += taps[t + r] * x[i, jj, c]
-                tmp[i, j, c] = acc
+                    acc += taps[t + r] * src[jj * k + c]
+                dst[j * k + c] = acc
     for i in nb.prange(h):
-        for j in range(w):
-            for c in range(k):
-                out[i, j, c] = 0.0
+        dst = of[i]
+        for q in range(m):
+            dst[q] = 0.0
         for t in range(-r, r + 1):
             ii = min(max(i + t, 0), h - 1)
             wt = taps[t + r]
-            for j in range(w):
-                for c in range(k):
-                    out[i, j, c] += wt * tmp[ii, j, c]
+            src = tmp[ii]
+            for q in range(m):
+                dst[q] += wt * src[q]
 
 
 def smooth_image_fast(image: np.ndarray, sigma: float) -> np.ndarray:
