@@ -43,6 +43,53 @@ def test_support_weights_engines_agree_and_normalise() -> None:
     assert wts[k_left, 2, 2] > 100 * wts[k_right, 2, 2]
 
 
+def test_vectorised_exp_matches_libm() -> None:
+    import numba as nb
+
+    x = -np.linspace(0.0, 200.0, 200001).astype(np.float32)
+    out = np.empty_like(x)
+    bits = np.empty(x.size, np.int32)
+    nb.njit(lambda a, b, c: fusion._exp_neg_row(a, b, c))(x, out, bits)
+    ref = np.exp(x.astype(np.float64))
+    normal = x > -80.0
+    assert np.max(np.abs(out[normal] / ref[normal] - 1.0)) < 1e-7
+    assert out[0] == 1.0
+    assert np.all(out[~normal] < 2e-35) and np.all(out[~normal] >= 0)  # clamped, not NaN
+
+
+def test_support_weights_engines_agree_on_grey_and_extreme_gamma() -> None:
+    rng = np.random.default_rng(1)
+    img = rng.random((9, 14, 1), dtype=np.float32)
+    for gamma, radius in ((0.1, 2), (1e-3, 1), (5.0, 3)):
+        a = fusion.support_weights(img, radius, gamma)
+        b = fusion.support_weights(img, radius, gamma, engine="numpy")
+        np.testing.assert_allclose(a, b, atol=1e-6)
+        assert np.all(np.isfinite(a))
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_candidate_costs_equal_flow_cost_with_weight_planes(channels) -> None:
+    f0, f1, flow, _ = _two_layer_pair()
+    if channels == 1:
+        f0, f1 = (x.mean(axis=2, keepdims=True) for x in (f0, f1))
+    cands = [flow, flow + np.float32(1.5), flow * np.float32(-1.0)]
+    cands[2][:3] = 40.0  # some targets outside the frame
+    for radius, gamma in ((2, 0.1), (1, 0.05), (0, 0.1)):
+        got = fusion.candidate_costs(f0, f1, cands, radius, gamma, 0.1)
+        ref = fusion.candidate_costs(f0, f1, cands, radius, gamma, 0.1, engine="numpy")
+        wts = fusion.support_weights(f0, radius, gamma)
+        assert got.shape == (3,) + f0.shape[:2] and got.dtype == np.float32
+        for k, c in enumerate(cands):
+            np.testing.assert_allclose(got[k], fusion.flow_cost(f0, f1, c, wts, 0.1),
+                                       atol=2e-6)
+        np.testing.assert_allclose(got, ref, atol=2e-6)
+    assert got[0].mean() < got[1].mean()
+    with pytest.raises(ValueError, match="candidates"):
+        fusion.candidate_costs(f0, f1, [])
+    with pytest.raises(ValueError, match=r"candidates\[1\]"):
+        fusion.candidate_costs(f0, f1, [flow, flow[:-1]])
+
+
 def test_flow_cost_engines_agree_and_rank_the_true_flow_first() -> None:
     f0, f1, flow, _ = _two_layer_pair()
     wts = fusion.support_weights(f0)

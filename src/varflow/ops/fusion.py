@@ -50,6 +50,7 @@ __all__ = [
     "support_weights",
     "flow_cost",
     "fuse",
+    "candidate_costs",
     "repair",
     "noise_sigma",
     "noise_sigma_flat",
@@ -105,9 +106,76 @@ def _support_weights_numpy(img: np.ndarray, radius: int, gamma: float) -> np.nda
     return out
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def _support_weights_kernel(img, offs, gamma, radius, out):
-    h, w, nc = img.shape
+#: Fast-math flags without ``reassoc``: the two-constant range reduction of
+#: :func:`_exp_neg_row` must not be folded into one multiplication.
+_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
+
+
+@nb.njit(cache=True, fastmath=_NO_REASSOC, inline="always")
+def _exp_neg_row(x, out, bits):
+    """``out = exp(x)`` for float32 ``x <= 0``, in loops the compiler vectorises.
+
+    Range reduction ``x = n ln 2 + r`` (ln 2 in two parts, Cody & Waite), the
+    degree-6 minimax polynomial of Cephes' ``expf`` on ``|r| <= ln 2 / 2``, and the
+    factor ``2^n`` assembled in the exponent bits of ``bits`` (int32).  ``x`` is
+    clamped at -87 (``exp(-87)`` ~ 1.6e-38, the smallest normal float32 is 1.2e-38);
+    the relative error is below 1e-7 (tests).  ``libm``'s ``expf`` is a scalar call,
+    the bulk of :func:`support_weights` without this.
+    """
+    log2e = np.float32(1.44269504088896341)
+    c1 = np.float32(0.693359375)
+    c2 = np.float32(-2.12194440e-4)
+    lo = np.float32(-87.0)
+    for j in range(x.shape[0]):
+        xv = max(x[j], lo)
+        n = np.floor(xv * log2e + np.float32(0.5))
+        r = xv - n * c1
+        r = r - n * c2
+        q = np.float32(1.9875691500e-4)
+        q = q * r + np.float32(1.3981999507e-3)
+        q = q * r + np.float32(8.3334519073e-3)
+        q = q * r + np.float32(4.1665795894e-2)
+        q = q * r + np.float32(1.6666665459e-1)
+        q = q * r + np.float32(5.0000001201e-1)
+        out[j] = q * r * r + r + np.float32(1.0)
+        bits[j] = (np.int32(n) + np.int32(127)) << np.int32(23)
+    scale = bits.view(np.float32)
+    for j in range(x.shape[0]):
+        out[j] = out[j] * scale[j]
+
+
+@nb.njit(cache=True, fastmath=_NO_REASSOC, inline="always")
+def _window_exponent_row(planar, i, yi, dx, w, inv_g, sk, d):
+    """``d[j] = -|I(yi, j + dx) - I(i, j)|₁ / γ - s_k`` for row ``i`` of ``planar`` (C, H, W).
+
+    Columns whose neighbour ``j + dx`` is outside take the edge column's value.
+    The middle run indexes slices with the bare loop variable, so that Numba
+    drops its negative-index checks and LLVM vectorises it.
+    """
+    nc = planar.shape[0]
+    lo = min(max(0, -dx), w)  # columns lo..hi-1 need no clamping
+    hi = max(min(w, w - dx), lo)
+    for j in range(w):
+        d[j] = 0.0
+    dm = d[lo:hi]
+    for c in range(nc):
+        cur = planar[c, i]
+        nbr = planar[c, yi]
+        curm = cur[lo:hi]
+        nbrm = nbr[lo + dx:hi + dx]
+        for jj in range(hi - lo):
+            dm[jj] += abs(nbrm[jj] - curm[jj])
+        for j in range(lo):
+            d[j] += abs(nbr[min(max(j + dx, 0), w - 1)] - cur[j])
+        for j in range(hi, w):
+            d[j] += abs(nbr[min(max(j + dx, 0), w - 1)] - cur[j])
+    for j in range(w):
+        d[j] = -d[j] * inv_g - sk
+
+
+@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+def _support_weights_kernel(planar, offs, gamma, radius, out):
+    nc, h, w = planar.shape
     nk = offs.shape[0]
     inv_g = np.float32(1.0 / gamma)
     spat = np.empty(nk, np.float32)
@@ -115,19 +183,23 @@ def _support_weights_kernel(img, offs, gamma, radius, out):
         spat[k] = math.sqrt(offs[k, 0] ** 2 + offs[k, 1] ** 2) / (radius + 1)
     for i in nb.prange(h):
         tot = np.zeros(w, np.float32)
+        d = np.empty(w, np.float32)
+        e = np.empty(w, np.float32)
+        bits = np.empty(w, np.int32)
         for k in range(nk):
             yi = min(max(i + offs[k, 0], 0), h - 1)
+            _window_exponent_row(planar, i, yi, offs[k, 1], w, inv_g, spat[k], d)
+            _exp_neg_row(d, e, bits)
+            row = out[k, i]
             for j in range(w):
-                xj = min(max(j + offs[k, 1], 0), w - 1)
-                d = np.float32(0.0)
-                for c in range(nc):
-                    d += abs(img[yi, xj, c] - img[i, j, c])
-                v = np.exp(-d * inv_g - spat[k])
-                out[k, i, j] = v
-                tot[j] += v
+                row[j] = e[j]
+                tot[j] += e[j]
+        for j in range(w):
+            tot[j] = np.float32(1.0) / tot[j]
         for k in range(nk):
+            row = out[k, i]
             for j in range(w):
-                out[k, i, j] /= tot[j]
+                row[j] *= tot[j]
 
 
 def support_weights(image: np.ndarray, radius: int = 2, gamma: float = 0.1,
@@ -159,7 +231,8 @@ def support_weights(image: np.ndarray, radius: int = 2, gamma: float = 0.1,
         return _support_weights_numpy(img, radius, gamma)
     offs = _offsets(radius)
     out = np.empty((len(offs),) + img.shape[:2], np.float32)
-    _support_weights_kernel(img, offs, np.float32(gamma), radius, out)
+    planar = np.ascontiguousarray(img.transpose(2, 0, 1))
+    _support_weights_kernel(planar, offs, np.float32(gamma), radius, out)
     return out
 
 
@@ -369,6 +442,115 @@ def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: 
         best_cost = np.where(better, cost, best_cost)
         choice[better] = k
     return best, choice
+
+
+@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+def _candidate_costs_kernel(planar, res, offs, gamma, radius, trunc, out):
+    """:func:`candidate_costs` with the support weights made on the fly, row by row.
+
+    ``planar`` (C, H, W) is ``i0``; ``res`` (K, H, W) each candidate's truncated
+    residual (``_OUT`` off-frame).  The unnormalised weights
+    ``exp(-d/γ - |o|/(R + 1))`` serve every candidate; their normalisation cancels
+    in the weighted mean.
+    """
+    nc, h, w = planar.shape
+    nk = offs.shape[0]
+    ncand = res.shape[0]
+    inv_g = np.float32(1.0 / gamma)
+    spat = np.empty(nk, np.float32)
+    for k in range(nk):
+        spat[k] = math.sqrt(offs[k, 0] ** 2 + offs[k, 1] ** 2) / (radius + 1)
+    for i in nb.prange(h):
+        d = np.empty(w, np.float32)
+        e = np.empty(w, np.float32)
+        bits = np.empty(w, np.int32)
+        acc = np.zeros((ncand, w), np.float32)
+        tot = np.zeros((ncand, w), np.float32)
+        for k in range(nk):
+            yi = min(max(i + offs[k, 0], 0), h - 1)
+            dx = offs[k, 1]
+            _window_exponent_row(planar, i, yi, dx, w, inv_g, spat[k], d)
+            _exp_neg_row(d, e, bits)
+            lo = min(max(0, -dx), w)
+            hi = max(min(w, w - dx), lo)
+            em = e[lo:hi]
+            for m in range(ncand):
+                rr = res[m, yi]
+                rm = rr[lo + dx:hi + dx]
+                am = acc[m, lo:hi]
+                tm = tot[m, lo:hi]
+                for jj in range(hi - lo):
+                    r = rm[jj]
+                    ok = r >= 0.0
+                    am[jj] += em[jj] * r if ok else np.float32(0.0)
+                    tm[jj] += em[jj] if ok else np.float32(0.0)
+                for j in range(lo):
+                    r = rr[min(max(j + dx, 0), w - 1)]
+                    if r >= 0.0:
+                        acc[m, j] += e[j] * r
+                        tot[m, j] += e[j]
+                for j in range(hi, w):
+                    r = rr[min(max(j + dx, 0), w - 1)]
+                    if r >= 0.0:
+                        acc[m, j] += e[j] * r
+                        tot[m, j] += e[j]
+        for m in range(ncand):
+            for j in range(w):
+                out[m, i, j] = acc[m, j] / tot[m, j] if tot[m, j] > 0.0 else trunc
+
+
+def candidate_costs(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray],
+                    radius: int = 2, gamma: float = 0.1, truncation: float = 0.1,
+                    engine: str = "numba") -> np.ndarray:
+    """:func:`flow_cost` of several candidates without the weight planes.
+
+    Equal (to rounding) to ``flow_cost(i0, i1, c, support_weights(i0, radius,
+    gamma), truncation)`` for each candidate ``c``, but the Numba engine makes the
+    weights of each window on the fly and aggregates every candidate's residuals
+    with them in one pass: no ``(2R + 1)²`` planes are written and read back.  For
+    a single use of the weights (a pyramid level of ``tvl1-ld``) this is the cheap
+    path; :func:`fuse` suits weights reused over many fusions.
+
+    Parameters
+    ----------
+    i0, i1 : ndarray, shape (H, W) or (H, W, C), float32
+    candidates : list of ndarray, each (H, W, 2)
+    radius, gamma : as in :func:`support_weights`.
+    truncation : float
+        T, as in :func:`flow_cost`.
+    engine : {"numba", "numpy"}
+        ``"numpy"``: :func:`support_weights` and :func:`flow_cost` (NumPy engines).
+
+    Returns
+    -------
+    ndarray, shape (K, H, W), float32
+        The cost of each candidate.
+    """
+    _check_engine(engine)
+    if not candidates:
+        raise ValueError("candidates: need at least one flow")
+    if radius < 0:
+        raise ValueError(f"radius: must be >= 0, got {radius}")
+    if not gamma > 0:
+        raise ValueError(f"gamma: must be > 0, got {gamma}")
+    i0 = _check_image(i0, "i0")
+    i1 = _check_image(i1, "i1")
+    if i1.shape != i0.shape:
+        raise ValueError(f"i1: shape {i1.shape} differs from i0 {i0.shape}")
+    flows = [_check_flow(c, i0.shape[:2], f"candidates[{k}]") for k, c in enumerate(candidates)]
+    if engine == "numpy":
+        weights = _support_weights_numpy(i0, radius, gamma)
+        return np.stack([_shifted_cost(i0, i1, f, 0, 0, weights, truncation, "numpy")
+                         for f in flows])
+    h, w = i0.shape[:2]
+    res = np.empty((len(flows), h, w), np.float32)
+    for k, f in enumerate(flows):
+        _residual_kernel(i0, i1, f, 0, 0, np.float32(truncation), res[k])
+    out = np.empty_like(res)
+    planar = np.ascontiguousarray(i0.transpose(2, 0, 1))
+    _candidate_costs_kernel(planar, res, _offsets(radius), np.float32(gamma), radius,
+                            np.float32(truncation), out)
+    return out
 
 
 def noise_sigma(image: np.ndarray) -> float:
