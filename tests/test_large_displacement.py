@@ -102,6 +102,20 @@ def test_matching_flow_follows_the_object(pair):
     assert np.isfinite(err).mean() > 0.6  # most of the disc is supported by matches
 
 
+def test_interpolation_on_a_reduced_grid_still_follows_the_object(pair):
+    f0, f1, gt, valid, disc = pair
+    full = matching_flow(f0, f1, LargeDisplacementParams())  # 160x224: below the limit
+    small = matching_flow(f0, f1, LargeDisplacementParams(interp_max_pixels=H * W // 4))
+    assert small.shape == full.shape == (H, W, 2) and small.dtype == np.float32
+    np.testing.assert_array_equal(np.isnan(small), np.isnan(full))  # same support
+    inner = disc & valid & np.isfinite(small[..., 0])
+    err_small = np.hypot(*(small - gt)[inner].T)
+    err_full = np.hypot(*(full - gt)[inner].T)
+    assert np.median(err_small) < 1.0
+    assert np.median(err_small) < np.median(err_full) + 0.5
+    assert not np.array_equal(small, full)  # the reduced grid was used
+
+
 def testfusion_hook_keeps_the_better_candidate():
     rng = np.random.default_rng(3)
     h, w = 48, 64
@@ -130,7 +144,8 @@ def testfusion_hook_keeps_the_better_candidate():
     ("field", "value"),
     [("match_step", 0), ("match_levels", 0), ("interp_k", 0), ("fusion_radius", -1),
      ("fusion_truncation", 0.0), ("fusion_gamma", float("nan")), ("match_fb_threshold", -1.0),
-     ("min_matches", 0), ("interp_a", float("inf"))],
+     ("min_matches", 0), ("interp_a", float("inf")), ("interp_max_pixels", 63),
+     ("interp_max_pixels", 2.0**17), ("match_iterations", 0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):

@@ -19,8 +19,8 @@ feature matching, in three stages:
    the forward-backward check; in occluded regions ``w_m`` is only interpolated,
    and a wrong vector there can still fit the frames), the two compete: the pixel
    keeps the one with the lower edge-aware truncated photometric cost
-   (:func:`varflow.ops.fusion.fuse`, the data term aggregated over a small window
-   with adaptive support weights).  The level's warps then refine the fused flow,
+   (:func:`varflow.ops.fusion.candidate_costs`, the data term aggregated over a
+   small window with adaptive support weights).  The level's warps then refine the fused flow,
    so the matches bring back what the pyramid lost and the variational
    refinement removes their errors.  Where the motion is small the two candidates
    agree and the result is that of ``tvl1``.
@@ -54,7 +54,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._validate import check_pair
-from ..ops.fusion import fuse, support_weights
+from ..ops.fusion import candidate_costs
 from ..ops.interpolation import InterpParams, interpolate
 from ..ops.matching import MatchParams, match
 from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image_fast
@@ -75,9 +75,10 @@ class LargeDisplacementParams(TVL1Params):
     Middlebury mean stays within 2 % of ``tvl1``'s (benchmarks/README.md).  Every
     :class:`TVL1Params` default (the ``tvl1`` model: grey channel, gradient term,
     Huber-TV) is kept except ``n_warps`` = 3 (the matching carries the large
-    motion).  On that model: tuning split 2.12 px, Middlebury 0.272 against
-    ``tvl1``'s 0.268; the stages were tuned on the plain energy (2.16 px, Middlebury
-    0.287 against its 0.284).
+    motion).  On that model: tuning split 2.07 px, Middlebury 0.2724 against
+    ``tvl1``'s 0.2677 (with the interpolation on at most 2**17 pixels and K = 32,
+    chosen for speed in session 5; before, 2.15 px and 0.2719); the stages were
+    tuned on the plain energy (2.16 px, Middlebury 0.287 against its 0.284).
 
     Attributes
     ----------
@@ -87,6 +88,9 @@ class LargeDisplacementParams(TVL1Params):
         split 2.22 px against 2.16, and 1.3 x the matching and interpolation time).
     match_levels : int
         k, pyramid levels of the matching (factor 1/2 each).  Default 4.
+    match_iterations : int
+        n, PatchMatch sweeps per matching level (:class:`~varflow.ops.matching.MatchParams`
+        ``iterations``).  Default 6 (4: tuning split 2.20 px against 2.09).
     match_max_displacement : float
         Largest displacement searched at the coarsest matching level, pixels.
         Default 160.
@@ -98,9 +102,21 @@ class LargeDisplacementParams(TVL1Params):
         (in (0, 1]; Gaussian pre-smoothing σ = 0.6/scale − 0.6 px against aliasing),
         and their flow is resized back: the variational refinement restores the
         detail, and the cost falls with the area.  Default 1.
+    interp_max_pixels : int
+        The interpolation (its geodesic distances, Voronoi cells and rendering) runs
+        on the matched frame resized to at most this many pixels (the matches keep
+        their positions, scaled to that grid), and its flow is resized back.  The
+        geodesic Voronoi partition, a sequential Dijkstra over every pixel, is the
+        largest cost of the stage; the variational refinement restores the detail.
+        Default 2**17 = 131072 (a 1024x436 frame is interpolated at 0.54 of its
+        size, the 384x512 generator pairs at 0.82; on the tuning split the mean
+        AEE did not change, and the stage's time fell from about 0.75 s to 0.3 s
+        per Sintel pair together with ``interp_k`` = 32).
     interp_k : int
         K, geodesically nearest matches of each match in its locally affine model
-        (:class:`varflow.ops.interpolation.InterpParams` ``k``).  Default 64.
+        (:class:`varflow.ops.interpolation.InterpParams` ``k``).  Default 32 (the
+        per-seed Dijkstra of the K nearest seeds costs in proportion; on the tuning
+        split 32 gave 2.09 px and 48 2.07 against 2.16 for 64).
     interp_a : float
         a, scale of the interpolation kernel ``exp(-a D)`` over geodesic distances
         D.  Default 1.
@@ -131,10 +147,12 @@ class LargeDisplacementParams(TVL1Params):
     n_warps: int = 3
     match_step: int = 4
     match_levels: int = 4
+    match_iterations: int = 6
     match_max_displacement: float = 160.0
     match_fb_threshold: float = 3.0
     match_scale: float = 1.0
-    interp_k: int = 64
+    interp_max_pixels: int = 1 << 17
+    interp_k: int = 32
     interp_a: float = 1.0
     fusion_radius: int = 2
     fusion_gamma: float = 0.1
@@ -148,8 +166,8 @@ class LargeDisplacementParams(TVL1Params):
         super().__post_init__()
         _check(isinstance(self.support_radius, int | np.integer) and self.support_radius >= 0,
                "support_radius", f"must be an integer >= 0, got {self.support_radius!r}")
-        for name in ("match_step", "match_levels", "interp_k", "fusion_min_size",
-                     "min_matches"):
+        for name in ("match_step", "match_levels", "match_iterations", "interp_k",
+                     "fusion_min_size", "min_matches"):
             value = getattr(self, name)
             _check(isinstance(value, int | np.integer) and not isinstance(value, bool)
                    and value >= 1, name, f"must be an integer >= 1, got {value!r}")
@@ -159,6 +177,10 @@ class LargeDisplacementParams(TVL1Params):
                "fusion_threshold", f"must be a finite number >= 0, got {self.fusion_threshold}")
         _check(0.0 < self.match_scale <= 1.0, "match_scale",
                f"must be in (0, 1], got {self.match_scale}")
+        _check(isinstance(self.interp_max_pixels, int | np.integer)
+               and not isinstance(self.interp_max_pixels, bool)
+               and self.interp_max_pixels >= 64, "interp_max_pixels",
+               f"must be an integer >= 64, got {self.interp_max_pixels!r}")
         for name in ("match_max_displacement", "match_fb_threshold", "interp_a",
                      "fusion_gamma", "fusion_truncation"):
             value = getattr(self, name)
@@ -170,6 +192,7 @@ class LargeDisplacementParams(TVL1Params):
     def match_params(self) -> MatchParams:
         """The :class:`~varflow.ops.matching.MatchParams` of the matching stage."""
         return MatchParams(step=int(self.match_step), levels=int(self.match_levels),
+                           iterations=int(self.match_iterations),
                            max_displacement=float(self.match_max_displacement
                                                   * self.match_scale),
                            fb_threshold=float(self.match_fb_threshold))
@@ -191,6 +214,26 @@ def _support(grid_flow: np.ndarray, step: int, shape: tuple[int, int],
     gi = np.clip(np.rint((np.arange(h) - off) / step).astype(np.int64), 0, gh - 1)
     gj = np.clip(np.rint((np.arange(w) - off) / step).astype(np.int64), 0, gw - 1)
     return kept[gi[:, None], gj[None, :]]
+
+
+def _interpolate_scaled(image: np.ndarray, points: np.ndarray, flow: np.ndarray,
+                        params: LargeDisplacementParams) -> np.ndarray:
+    """The interpolation of ``(points, flow)`` over ``image``, on at most ``interp_max_pixels``.
+
+    A larger image is smoothed and resized by ``s = sqrt(max_pixels / (H W))``,
+    the matches are mapped to its pixel centres, and the dense flow is resized
+    back to ``image``.
+    """
+    full = image.shape[:2]
+    scale = math.sqrt(params.interp_max_pixels / (full[0] * full[1]))
+    if scale >= 1.0:
+        return interpolate(image, points, flow, params.interp_params())
+    small = (max(8, round(full[0] * scale)), max(8, round(full[1] * scale)))
+    sy, sx = small[0] / full[0], small[1] / full[1]
+    img = resize_bilinear(smooth_image_fast(image, 0.6 / scale - 0.6), small)
+    pts = ((points.astype(np.float64) + 0.5) * (sx, sy) - 0.5).astype(np.float32)
+    fl = (flow.astype(np.float64) * (sx, sy)).astype(np.float32)
+    return resize_flow(interpolate(img, pts, fl, params.interp_params()), full)
 
 
 def matching_flow(
@@ -234,7 +277,7 @@ def matching_flow(
                  params.min_matches)
         stats["interp_seconds"] = 0.0
         return None
-    dense = interpolate(I0, m.points, m.flow, params.interp_params())
+    dense = _interpolate_scaled(I0, m.points, m.flow, params)
     dense[~_support(m.grid_flow, m.step, I0.shape[:2], int(params.support_radius))] = np.nan
     if dense.shape[:2] != full:
         known = resize_bilinear(np.isfinite(dense[..., :1]).astype(np.float32), full)
@@ -268,10 +311,10 @@ def fusion_hook(candidate: np.ndarray, params: LargeDisplacementParams):
         t0 = time.perf_counter()
         cand = resize_flow(filled, (h, w))
         supported = resize_bilinear(known, (h, w))[..., 0] > 0.5
-        weights = support_weights(i0, int(params.fusion_radius), float(params.fusion_gamma))
-        _, choice = fuse(i0, i1, [flow, cand], weights, float(params.fusion_truncation))
+        cost = candidate_costs(i0, i1, [flow, cand], int(params.fusion_radius),
+                               float(params.fusion_gamma), float(params.fusion_truncation))
         differ = np.hypot(*(cand - flow).transpose(2, 0, 1)) > params.fusion_threshold
-        take = (choice == 1) & differ & supported
+        take = (cost[1] < cost[0]) & differ & supported
         fused = np.where(take[..., None], cand, flow).astype(np.float32)
         stats.setdefault("fusion_share", []).append(float(take.mean()))
         stats["fusion_seconds"] = stats.get("fusion_seconds", 0.0) + time.perf_counter() - t0
