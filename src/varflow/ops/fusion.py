@@ -14,9 +14,11 @@ surface (those with the reference colour of ``x``).  Residuals of targets outsid
 ``I1`` are unknown and left out (the cost is ``T`` when none is inside): a flow
 is neither rewarded nor punished for pointing out of the frame.
 
-Two uses:
+Uses:
 
 * :func:`fuse` — keep, per pixel, the candidate field with the smallest cost.
+* :func:`candidate_costs` — the costs of several candidates with the weights made
+  on the fly (no weight planes), for a single use of them (a level of ``tvl1-ld``).
 * :func:`repair` — spatial propagation of flow vectors in the manner of
   PatchMatch (Barnes et al. 2009): every pixel tries the current vectors of the
   pixels at a few offsets (8 directions × ``distances``) and keeps one that lowers
