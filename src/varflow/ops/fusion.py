@@ -146,6 +146,15 @@ def _exp_neg_row(x, out, bits):
         out[j] = out[j] * scale[j]
 
 
+@nb.njit(cache=True, inline="always")
+def _spatial_exponents(offs, radius):
+    """``|o_k| / (R + 1)`` of the window offsets ``offs`` (K, 2), float32."""
+    spat = np.empty(offs.shape[0], np.float32)
+    for k in range(offs.shape[0]):
+        spat[k] = math.sqrt(offs[k, 0] ** 2 + offs[k, 1] ** 2) / (radius + 1)
+    return spat
+
+
 @nb.njit(cache=True, fastmath=_NO_REASSOC, inline="always")
 def _window_exponent_row(planar, i, yi, dx, w, inv_g, sk, d):
     """``d[j] = -|I(yi, j + dx) - I(i, j)|₁ / γ - s_k`` for row ``i`` of ``planar`` (C, H, W).
@@ -177,12 +186,10 @@ def _window_exponent_row(planar, i, yi, dx, w, inv_g, sk, d):
 
 @nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
 def _support_weights_kernel(planar, offs, gamma, radius, out):
-    nc, h, w = planar.shape
+    h, w = planar.shape[1:]
     nk = offs.shape[0]
     inv_g = np.float32(1.0 / gamma)
-    spat = np.empty(nk, np.float32)
-    for k in range(nk):
-        spat[k] = math.sqrt(offs[k, 0] ** 2 + offs[k, 1] ** 2) / (radius + 1)
+    spat = _spatial_exponents(offs, radius)
     for i in nb.prange(h):
         tot = np.zeros(w, np.float32)
         d = np.empty(w, np.float32)
@@ -455,13 +462,11 @@ def _candidate_costs_kernel(planar, res, offs, gamma, radius, trunc, out):
     ``exp(-d/γ - |o|/(R + 1))`` serve every candidate; their normalisation cancels
     in the weighted mean.
     """
-    nc, h, w = planar.shape
+    h, w = planar.shape[1:]
     nk = offs.shape[0]
     ncand = res.shape[0]
     inv_g = np.float32(1.0 / gamma)
-    spat = np.empty(nk, np.float32)
-    for k in range(nk):
-        spat[k] = math.sqrt(offs[k, 0] ** 2 + offs[k, 1] ** 2) / (radius + 1)
+    spat = _spatial_exponents(offs, radius)
     for i in nb.prange(h):
         d = np.empty(w, np.float32)
         e = np.empty(w, np.float32)
