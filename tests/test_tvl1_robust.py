@@ -192,11 +192,13 @@ def test_numba_and_numpy_engines_agree(extra):
     n_extra = 6 if extra.get("gradient_weight") else 0
     for s in states:
         assert s["q"].shape == (3, 48, 56)
-        assert (s.get("q_extra") is None) == (n_extra == 0)
-        if n_extra:
-            assert s["q_extra"].shape == (n_extra, 48, 56) and np.abs(s["q_extra"]).max() > 0
+        assert (s.get("q_all") is None) == (n_extra == 0)
+        if n_extra:  # one array for every channel's dual; state["q"] is a view of it
+            assert s["q_all"].shape == (3 + n_extra, 48, 56)
+            assert np.shares_memory(s["q"], s["q_all"])
+            assert np.abs(s["q_all"][3:]).max() > 0
     if n_extra:
-        np.testing.assert_allclose(states[0]["q_extra"], states[1]["q_extra"], atol=2e-3)
+        np.testing.assert_allclose(states[0]["q_all"], states[1]["q_all"], atol=2e-3)
 
 
 # ------------------------------------------------------------------ accuracy

@@ -913,13 +913,14 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     u = np.array(np.moveaxis(flow0, -1, 0), dtype=np.float32, order="C")  # a copy, always
     tens, aniso = kernel_tensor(state)
     nc = state["q"].shape[0]
-    if ix.shape[0] == nc:
-        q = state["q"]
-    else:  # extra channels: their dual variables live in state["q_extra"]
-        extra = state.get("q_extra")
-        if extra is None or extra.shape[0] != ix.shape[0] - nc:
+    q = state["q"]
+    if ix.shape[0] != nc:  # extra channels: one array holds every dual variable,
+        q = state.get("q_all")  # and state["q"] is a view of its first nc planes
+        if q is None or q.shape[0] != ix.shape[0]:
             extra = np.zeros((ix.shape[0] - nc,) + state["q"].shape[1:], np.float32)
-        q = np.concatenate([state["q"], extra])
+            q = np.concatenate([state["q"], extra])
+            state["q_all"] = q
+            state["q"] = q[:nc]
     args = (
         ix, iy, a, state["g"], tens, u, state["p"], state["tp"], q,
         np.float32(params.data_weight), np.float32(params.coupling), np.float32(params.tv_step),
@@ -929,9 +930,6 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
         n = tvl1_iterations(*args, _row_blocks(I0.shape[0]), np.float32(params.huber))
     else:
         n = tvl1_iterations_numpy(*args, None, params.huber)
-    if q is not state["q"]:
-        state["q"][...] = q[:nc]
-        state["q_extra"] = np.ascontiguousarray(q[nc:])
     state["iterations"] = state.get("iterations", 0) + n
     return np.moveaxis(u, 0, -1)  # a view: the driver's median reads it planar, uncopied
 
