@@ -117,8 +117,8 @@ _NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 def _exp_neg_row(x, out, bits):
     """``out = exp(x)`` for float32 ``x <= 0``, in loops the compiler vectorises.
 
-    Range reduction ``x = n ln 2 + r`` (ln 2 in two parts, Cody & Waite), the
-    degree-6 minimax polynomial of Cephes' ``expf`` on ``|r| <= ln 2 / 2``, and the
+    Range reduction ``x = n ln 2 + r`` (ln 2 in two parts, Cody & Waite), Cephes'
+    ``expf`` polynomial ``1 + r + r² P5(r)`` on ``|r| <= ln 2 / 2``, and the
     factor ``2^n`` assembled in the exponent bits of ``bits`` (int32).  ``x`` is
     clamped at -87 (``exp(-87)`` ~ 1.6e-38, the smallest normal float32 is 1.2e-38);
     the relative error is below 1e-7 (tests).  ``libm``'s ``expf`` is a scalar call,
