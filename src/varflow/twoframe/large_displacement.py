@@ -216,11 +216,19 @@ def _support(grid_flow: np.ndarray, step: int, shape: tuple[int, int],
     return kept[gi[:, None], gj[None, :]]
 
 
+def _downscale(image: np.ndarray, scale: float) -> np.ndarray:
+    """``image`` resized by ``scale`` < 1 (each side at least 8 px), after a Gaussian of
+    σ = 0.6/scale − 0.6 px against aliasing."""
+    h, w = image.shape[:2]
+    small = (max(8, round(h * scale)), max(8, round(w * scale)))
+    return resize_bilinear(smooth_image_fast(image, 0.6 / scale - 0.6), small)
+
+
 def _interpolate_scaled(image: np.ndarray, points: np.ndarray, flow: np.ndarray,
                         params: LargeDisplacementParams) -> np.ndarray:
     """The interpolation of ``(points, flow)`` over ``image``, on at most ``interp_max_pixels``.
 
-    A larger image is smoothed and resized by ``s = sqrt(max_pixels / (H W))``,
+    A larger image is reduced by :func:`_downscale` with ``s = sqrt(max_pixels / (H W))``,
     the matches are mapped to its pixel centres, and the dense flow is resized
     back to ``image``.
     """
@@ -228,9 +236,8 @@ def _interpolate_scaled(image: np.ndarray, points: np.ndarray, flow: np.ndarray,
     scale = math.sqrt(params.interp_max_pixels / (full[0] * full[1]))
     if scale >= 1.0:
         return interpolate(image, points, flow, params.interp_params())
-    small = (max(8, round(full[0] * scale)), max(8, round(full[1] * scale)))
-    sy, sx = small[0] / full[0], small[1] / full[1]
-    img = resize_bilinear(smooth_image_fast(image, 0.6 / scale - 0.6), small)
+    img = _downscale(image, scale)
+    sy, sx = img.shape[0] / full[0], img.shape[1] / full[1]
     pts = ((points.astype(np.float64) + 0.5) * (sx, sy) - 0.5).astype(np.float32)
     fl = (flow.astype(np.float64) * (sx, sy)).astype(np.float32)
     return resize_flow(interpolate(img, pts, fl, params.interp_params()), full)
@@ -265,10 +272,7 @@ def matching_flow(
     t0 = time.perf_counter()
     full = I0.shape[:2]
     if params.match_scale < 1.0:
-        small = (max(8, round(full[0] * params.match_scale)),
-                 max(8, round(full[1] * params.match_scale)))
-        sigma = 0.6 / params.match_scale - 0.6
-        I0, I1 = (resize_bilinear(smooth_image_fast(x, sigma), small) for x in (I0, I1))
+        I0, I1 = (_downscale(x, params.match_scale) for x in (I0, I1))
     m = match(I0, I1, params.match_params())
     t1 = time.perf_counter()
     stats.update(matches=int(m.points.shape[0]), match_seconds=t1 - t0)

@@ -852,7 +852,7 @@ def solve_warp(
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
-    u = np.array(np.moveaxis(flow0, -1, 0), dtype=np.float32, order="C")  # a copy, always
+    u = planar(flow0, copy=True)
     tens, aniso = kernel_tensor(state)
     wsp = (np.float32(lam_sp) * state["coverage"]).astype(np.float32)
     if params.combined_solver == "primal-dual":

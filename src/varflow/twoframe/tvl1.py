@@ -619,9 +619,17 @@ def init_level_state(
     state["q"] = np.zeros((nc, h, w), np.float32)
 
 
-def planar(x: np.ndarray) -> np.ndarray:
-    """``(H, W, K)`` -> C-contiguous planar ``(K, H, W)`` float32 (the kernels' layout)."""
-    return np.ascontiguousarray(np.moveaxis(x, -1, 0), dtype=np.float32)
+def planar(x: np.ndarray, copy: bool = False) -> np.ndarray:
+    """``(H, W, K)`` -> C-contiguous planar ``(K, H, W)`` float32 (the kernels' layout).
+
+    Without ``copy`` a view of ``x`` when ``x`` already is planar data; with it always a
+    new array (for the solvers, which update their flow in place: the flow they start
+    from may be such a view, e.g. the median filter's output).
+    """
+    x = np.moveaxis(x, -1, 0)
+    if copy:
+        return np.array(x, dtype=np.float32, order="C")
+    return np.ascontiguousarray(x, dtype=np.float32)
 
 
 def linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
@@ -910,7 +918,7 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
-    u = np.array(np.moveaxis(flow0, -1, 0), dtype=np.float32, order="C")  # a copy, always
+    u = planar(flow0, copy=True)
     tens, aniso = kernel_tensor(state)
     nc = state["q"].shape[0]
     q = state["q"]
