@@ -106,21 +106,26 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 def _warp_kernel(planes, flow, out, inside):
     h, w, k = planes.shape
     f2 = np.float32(2.0)
+    xmax = np.float32(w - 1.0)
+    ymax = np.float32(h - 1.0)
     for i in nb.prange(h):
+        fl = flow[i]
+        ins = inside[i]
+        o = out[i]
         for j in range(w):
-            x = np.float32(j) + flow[i, j, 0]
-            y = np.float32(i) + flow[i, j, 1]
-            inside[i, j] = (x >= 0.0) and (x <= w - 1.0) and (y >= 0.0) and (y <= h - 1.0)
+            x = np.float32(j) + fl[j, 0]
+            y = np.float32(i) + fl[j, 1]
+            ins[j] = (x >= 0.0) and (x <= xmax) and (y >= 0.0) and (y <= ymax)
             if not (x == x and y == y):  # NaN flow: treat as outside
                 x = -f2
                 y = -f2
             # keep the far-away samples finite and bounded
             x = min(max(x, -f2), np.float32(w + 1.0))
             y = min(max(y, -f2), np.float32(h + 1.0))
-            fx0 = math.floor(x)
-            fy0 = math.floor(y)
-            fx = x - fx0
-            fy = y - fy0
+            ix0 = int(x + f2) - 2  # floor (truncation of a positive number)
+            iy0 = int(y + f2) - 2
+            fx = x - np.float32(ix0)
+            fy = y - np.float32(iy0)
             # the weights stay in scalars and the 4 x 4 taps are summed row by row
             # (separably): no per-pixel arrays, every product in registers
             wx0 = _far(_ONE + fx)
@@ -131,22 +136,30 @@ def _warp_kernel(planes, flow, out, inside):
             wy1 = _near(fy)
             wy2 = _near(_ONE - fy)
             wy3 = _far(f2 - fy)
-            ix0 = int(fx0)
-            iy0 = int(fy0)
-            x0 = min(max(ix0 - 1, 0), w - 1)
-            x1 = min(max(ix0, 0), w - 1)
-            x2 = min(max(ix0 + 1, 0), w - 1)
-            x3 = min(max(ix0 + 2, 0), w - 1)
-            r0 = planes[min(max(iy0 - 1, 0), h - 1)]
-            r1 = planes[min(max(iy0, 0), h - 1)]
-            r2 = planes[min(max(iy0 + 1, 0), h - 1)]
-            r3 = planes[min(max(iy0 + 2, 0), h - 1)]
+            if ix0 >= 1 and ix0 <= w - 3 and iy0 >= 1 and iy0 <= h - 3:  # no clamping
+                x0 = ix0 - 1
+                x1 = ix0
+                x2 = ix0 + 1
+                x3 = ix0 + 2
+                r0 = planes[iy0 - 1]
+                r1 = planes[iy0]
+                r2 = planes[iy0 + 1]
+                r3 = planes[iy0 + 2]
+            else:
+                x0 = min(max(ix0 - 1, 0), w - 1)
+                x1 = min(max(ix0, 0), w - 1)
+                x2 = min(max(ix0 + 1, 0), w - 1)
+                x3 = min(max(ix0 + 2, 0), w - 1)
+                r0 = planes[min(max(iy0 - 1, 0), h - 1)]
+                r1 = planes[min(max(iy0, 0), h - 1)]
+                r2 = planes[min(max(iy0 + 1, 0), h - 1)]
+                r3 = planes[min(max(iy0 + 2, 0), h - 1)]
             for c in range(k):
                 s0 = wx0 * r0[x0, c] + wx1 * r0[x1, c] + wx2 * r0[x2, c] + wx3 * r0[x3, c]
                 s1 = wx0 * r1[x0, c] + wx1 * r1[x1, c] + wx2 * r1[x2, c] + wx3 * r1[x3, c]
                 s2 = wx0 * r2[x0, c] + wx1 * r2[x1, c] + wx2 * r2[x2, c] + wx3 * r2[x3, c]
                 s3 = wx0 * r3[x0, c] + wx1 * r3[x1, c] + wx2 * r3[x2, c] + wx3 * r3[x3, c]
-                out[i, j, c] = wy0 * s0 + wy1 * s1 + wy2 * s2 + wy3 * s3
+                o[j, c] = wy0 * s0 + wy1 * s1 + wy2 * s2 + wy3 * s3
 
 
 def warp_bicubic(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
