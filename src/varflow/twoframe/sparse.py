@@ -685,9 +685,9 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
                          max_iter, tol, n_sweeps, aniso, blocks):
     """Exact TV-L1 primal-dual iterations on the combined energy (in place on u, p, tp, q).
 
-    The scheme of :func:`varflow.twoframe.tvl1.tvl1_iterations` (same row
-    structure and stopping rule) with the sparse quadratic folded into the
-    point-wise step::
+    The scheme of :func:`varflow.twoframe.tvl1.tvl1_iterations` (one iteration
+    per pass, the stopping test after every iteration) with the sparse quadratic
+    folded into the point-wise step::
 
         v = argmin_v |v − u|²/(2θ) + w |v − ū|² + λ Σ_c |ρ_c(v)|
           = prox_{t' Σ|ρ_c|}(z),  z = (u + 2θw ū)/(1 + 2θw),  t' = λθ/(1 + 2θw),

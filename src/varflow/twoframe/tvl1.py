@@ -387,6 +387,18 @@ def _project(px, py, lim):
     return px * s, py * s
 
 
+@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _shrink_project(zx, zy, lim, se):
+    """``Π_{|p| ≤ lim}(z / (1 + se / lim))`` as ``z · lim / max(lim + se, |z|)``.
+
+    One division and one square root: scaling ``z`` by ``h = lim / (lim + se)`` and
+    then projecting onto the ball of radius ``lim`` multiplies it by
+    ``min(h, lim / |z|)``.  With ``se = 0`` it is :func:`_project`.
+    """
+    s = lim / max(lim + se, math.sqrt(zx * zx + zy * zy))
+    return zx * s, zy * s
+
+
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
     """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``.
@@ -408,22 +420,13 @@ def _dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
         pxr = p[2 * k, i]
         pyr = p[2 * k + 1, i]
         if not aniso:
-            if se > 0:
-                for j in range(w - 1):
-                    hb = _F1 / (_F1 + se / gr[j])
-                    px, py = _project((pxr[j] + step * (ucr[j] - uc[j])) * hb,
-                                      (pyr[j] + cy * (un[j] - uc[j])) * hb, gr[j])
-                    pxr[j] = px
-                    pyr[j] = py
-            else:
-                for j in range(w - 1):
-                    px, py = _project(pxr[j] + step * (ucr[j] - uc[j]),
-                                      pyr[j] + cy * (un[j] - uc[j]), gr[j])
-                    pxr[j] = px
-                    pyr[j] = py
+            for j in range(w - 1):
+                px, py = _shrink_project(pxr[j] + step * (ucr[j] - uc[j]),
+                                         pyr[j] + cy * (un[j] - uc[j]), gr[j], se)
+                pxr[j] = px
+                pyr[j] = py
             j = w - 1
-            hb = _F1 / (_F1 + se / gr[j])
-            px, py = _project(pxr[j] * hb, (pyr[j] + cy * (un[j] - uc[j])) * hb, gr[j])
+            px, py = _shrink_project(pxr[j], pyr[j] + cy * (un[j] - uc[j]), gr[j], se)
             pxr[j] = px
             pyr[j] = py
         else:
@@ -438,13 +441,24 @@ def _dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
                 t11 = t11r[j]
                 t12 = t12r[j]
                 t22 = t22r[j]
-                hb = _F1 / (_F1 + se / gr[j])
-                px, py = _project((pxr[j] + t11 * gx + t12 * gy) * hb,
-                                  (pyr[j] + t12 * gx + t22 * gy) * hb, gr[j])
+                px, py = _shrink_project(pxr[j] + t11 * gx + t12 * gy,
+                                         pyr[j] + t12 * gx + t22 * gy, gr[j], se)
                 pxr[j] = px
                 pyr[j] = py
                 tpxr[j] = t11 * px + t12 * py
                 tpyr[j] = t12 * px + t22 * py
+
+
+@nb.njit(cache=True, fastmath=True, error_model="numpy")
+def _prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps):
+    """Data prox and primal update of row ``i`` (``d1``, ``d2``: row buffers); returns
+    the squared change of the flow on the row."""
+    w = u.shape[2]
+    for j in range(w):
+        d1[j] = u[0, i, j]
+        d2[j] = u[1, i, j]
+    _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
+    return _primal_row(u, tp, i, 0, d1, theta) + _primal_row(u, tp, i, 1, d2, theta)
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
@@ -454,13 +468,18 @@ def tvl1_iterations(
 ):
     """Numba TV-L1 iterations at one warp; updates ``u``, ``p``, ``tp``, ``q`` in place.
 
-    One pass per iteration: rows are split into contiguous blocks (one task
-    each); inside a block the primal update of row ``i`` is followed by the dual
-    update of row ``i - 1`` (which needs the new ``u`` of rows ``i - 1`` and
-    ``i``), so the flow and the dual variables are touched while in cache.  The
-    last row of each block waits for a second, short pass.  The result equals the
-    classic two-pass (Jacobi) scheme exactly: every primal update sees the dual
-    variables of the previous iteration.
+    Two iterations per pass over the data (temporal blocking): rows are split
+    into contiguous blocks (one task each) and a block is swept once, row by row,
+    carrying two iterations in a wavefront.  At row ``i`` the first iteration
+    updates the primal of row ``i`` and the dual of row ``i - 1`` (which needs the
+    new ``u`` of rows ``i - 1`` and ``i``); the second then updates the primal of
+    row ``i - 1`` and the dual of row ``i - 2``.  The data terms of a row are thus
+    read once for two iterations while in cache.  The few updates at the edges of
+    a block that need a neighbouring block's rows wait for three short passes.
+    The result equals the classic two-pass (Jacobi) scheme exactly: every primal
+    update sees the dual variables of the previous iteration.  The stopping test
+    runs after every second iteration (an odd ``max_iter`` ends with one
+    single-iteration pass).
 
     Parameters
     ----------
@@ -504,23 +523,57 @@ def tvl1_iterations(
     buf = np.empty((n_blk, 2, w), np.float32)
     it = 0
     while it < max_iter:
-        it += 1
-        for b in nb.prange(n_blk):
-            r0 = blocks[b]
-            r1 = blocks[b + 1]
-            d1 = buf[b, 0]
-            d2 = buf[b, 1]
-            for i in range(r0, r1):
-                for j in range(w):
-                    d1[j] = u[0, i, j]
-                    d2[j] = u[1, i, j]
-                _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
-                err = _primal_row(u, tp, i, 0, d1, theta)
-                errs[i] = err + _primal_row(u, tp, i, 1, d2, theta)
-                if i > r0:
-                    _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
-        for b in nb.prange(n_blk):
-            _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
+        if max_iter - it >= 2:
+            it += 2
+            # the wavefront: iteration A at rows i (primal) and i - 1 (dual), iteration B
+            # at i - 1 (primal) and i - 2 (dual); B's primal at the block's first row and
+            # everything that needs the next block's rows is left to the passes below
+            for b in nb.prange(n_blk):
+                r0 = blocks[b]
+                r1 = blocks[b + 1]
+                d1 = buf[b, 0]
+                d2 = buf[b, 1]
+                for i in range(r0, r1):
+                    _prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps)
+                    if i > r0:
+                        _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
+                    if i - 1 > r0:
+                        errs[i - 1] = _prox_primal_row(ix, iy, a, q, u, tp, i - 1, d1, d2, t,
+                                                       theta, n_sweeps)
+                    if i - 2 > r0:
+                        _dual_row(u, p, tp, g, tens, i - 2, step, aniso, huber)
+            for b in nb.prange(n_blk):  # A: dual of the last row (next block's first u)
+                _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
+            for b in nb.prange(n_blk):  # B: primal of the first and last rows
+                r0 = blocks[b]
+                r1 = blocks[b + 1]
+                errs[r0] = _prox_primal_row(ix, iy, a, q, u, tp, r0, buf[b, 0], buf[b, 1], t,
+                                            theta, n_sweeps)
+                if r1 - 1 > r0:
+                    errs[r1 - 1] = _prox_primal_row(ix, iy, a, q, u, tp, r1 - 1, buf[b, 0],
+                                                    buf[b, 1], t, theta, n_sweeps)
+            for b in nb.prange(n_blk):  # B: the duals left
+                r0 = blocks[b]
+                r1 = blocks[b + 1]
+                _dual_row(u, p, tp, g, tens, r0, step, aniso, huber)
+                if r1 - 2 > r0:
+                    _dual_row(u, p, tp, g, tens, r1 - 2, step, aniso, huber)
+                if r1 - 1 > r0:
+                    _dual_row(u, p, tp, g, tens, r1 - 1, step, aniso, huber)
+        else:
+            it += 1
+            for b in nb.prange(n_blk):
+                r0 = blocks[b]
+                r1 = blocks[b + 1]
+                d1 = buf[b, 0]
+                d2 = buf[b, 1]
+                for i in range(r0, r1):
+                    errs[i] = _prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta,
+                                               n_sweeps)
+                    if i > r0:
+                        _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
+            for b in nb.prange(n_blk):
+                _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
         if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
@@ -557,7 +610,7 @@ def tvl1_iterations_numpy(
             p[2 * k : 2 * k + 2] = np.moveaxis(pk, -1, 0)
             if aniso:
                 tp[2 * k : 2 * k + 2] = np.moveaxis(np.einsum("hwab,hwb->hwa", T, pk), -1, 0)
-        if err < tol * tol:
+        if err < tol * tol and it % 2 == 0:  # tested every second iteration, as the kernel
             break
     return it
 
