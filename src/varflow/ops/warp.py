@@ -12,8 +12,6 @@ and the Numba kernel used by :func:`warp_bicubic`.
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
