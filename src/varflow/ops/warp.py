@@ -102,17 +102,19 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
 def _warp_kernel(planes, flow, out, inside):
+    """Bicubic samples of ``planes`` (H, W, K) at ``x + flow``; ``flow`` planar (2, H, W)."""
     h, w, k = planes.shape
     f2 = np.float32(2.0)
     xmax = np.float32(w - 1.0)
     ymax = np.float32(h - 1.0)
     for i in nb.prange(h):
-        fl = flow[i]
+        fu = flow[0, i]
+        fv = flow[1, i]
         ins = inside[i]
         o = out[i]
         for j in range(w):
-            x = np.float32(j) + fl[j, 0]
-            y = np.float32(i) + fl[j, 1]
+            x = np.float32(j) + fu[j]
+            y = np.float32(i) + fv[j]
             ins[j] = (x >= 0.0) and (x <= xmax) and (y >= 0.0) and (y <= ymax)
             if not (x == x and y == y):  # NaN flow: treat as outside
                 x = -f2
@@ -178,10 +180,13 @@ def warp_bicubic(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.n
         True where ``(x + u, y + v)`` lies inside the image.
     """
     planes = np.ascontiguousarray(planes, dtype=np.float32)
-    flow = np.ascontiguousarray(flow, dtype=np.float32)
+    flow = np.asarray(flow)
     if planes.ndim != 3 or flow.shape != planes.shape[:2] + (2,):
         raise ValueError(f"warp: planes {planes.shape} and flow {flow.shape} do not match")
+    # the kernel reads the flow planar: no copy for the planar views the solvers and
+    # the median filter return
+    flow_p = np.ascontiguousarray(np.moveaxis(flow, -1, 0), dtype=np.float32)
     out = np.empty_like(planes)
     inside = np.empty(planes.shape[:2], dtype=np.bool_)
-    _warp_kernel(planes, flow, out, inside)
+    _warp_kernel(planes, flow_p, out, inside)
     return out, inside
