@@ -29,6 +29,7 @@ from varflow.ops.pyramid import (
     resize_flow,
     smooth_image,
     smooth_image_fast,
+    smooth_planes,
 )
 from varflow.ops.rof import rof_denoise, rof_denoise_numpy, structure_texture
 from varflow.ops.warp import warp_bicubic, warp_bicubic_numpy
@@ -206,6 +207,19 @@ def test_rof_engines_agree_and_reduce_tv():
     const = np.full((16, 16, 1), 0.4, np.float32)
     np.testing.assert_allclose(rof_denoise(const, 0.2, 20), const, atol=1e-6)
     np.testing.assert_allclose(structure_texture(const, 0.95), 0.02, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", [(23, 31, 5), (5, 3, 3), (1, 1, 2)])
+@pytest.mark.parametrize("sigma", [0.0, 0.4, 1.0, 2.5])
+def test_planar_smoothing_of_a_strided_view(sigma, shape):
+    stack = np.random.default_rng(13).random(shape, dtype=np.float32)
+    view = stack[..., 1:]  # not contiguous: read as it is
+    out = np.full((shape[2],) + shape[:2], np.nan, np.float32)
+    got = smooth_planes(view, sigma, out=out[1:])
+    assert got.shape == (shape[2] - 1,) + shape[:2] and np.isnan(out[0]).all()
+    want = np.moveaxis(smooth_image_fast(view, sigma), -1, 0)
+    np.testing.assert_allclose(out[1:], want, atol=2e-7)
+    np.testing.assert_allclose(got, np.moveaxis(smooth_image(view, sigma), -1, 0), atol=2e-6)
 
 
 @pytest.mark.parametrize("shape", [(23, 31, 4), (5, 3, 2), (1, 1, 1)])

@@ -21,6 +21,7 @@ __all__ = [
     "build_pyramid",
     "smooth_image",
     "smooth_image_fast",
+    "smooth_planes",
     "resize_bilinear",
     "resize_flow",
 ]
@@ -167,6 +168,73 @@ def smooth_image_fast(image: np.ndarray, sigma: float) -> np.ndarray:
         return x
     out = np.empty_like(x)
     _smooth_kernel(x, _gaussian_taps(sigma), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True, fastmath=True)
+def _smooth_planar_kernel(x, taps, out):
+    """:func:`_smooth_kernel` from a (possibly strided) ``(H, W, K)`` view to planar
+    ``(K, H, W)`` output, summing in the same order (the rows are first copied,
+    edges replicated, into a padded buffer)."""
+    h, w, k = x.shape
+    r = taps.shape[0] // 2
+    n = 2 * r + 1
+    tmp = np.empty((k, h, w), np.float32)
+    for task in nb.prange(k * h):
+        c = task // h
+        i = task - c * h
+        row = np.empty(w + 2 * r, np.float32)
+        for j in range(w):
+            row[r + j] = x[i, j, c]
+        for j in range(r):
+            row[j] = x[i, 0, c]
+            row[r + w + j] = x[i, w - 1, c]
+        dst = tmp[c, i]
+        for j in range(w):
+            acc = np.float32(0.0)
+            for t in range(n):
+                acc += taps[t] * row[j + t]
+            dst[j] = acc
+    for task in nb.prange(k * h):
+        c = task // h
+        i = task - c * h
+        dst = out[c, i]
+        for j in range(w):
+            dst[j] = 0.0
+        for t in range(-r, r + 1):
+            src = tmp[c, min(max(i + t, 0), h - 1)]
+            wt = taps[t + r]
+            for j in range(w):
+                dst[j] += wt * src[j]
+
+
+def smooth_planes(image: np.ndarray, sigma: float, out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`smooth_image_fast` with planar output: ``(H, W, K)`` in, ``(K, H, W)`` out.
+
+    ``image`` may be a strided view (e.g. some channels of a stack of warped
+    planes): it is read without a copy.  The sums are those of
+    :func:`smooth_image_fast`, term by term.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, K), float32
+    sigma : float
+        σ of the Gaussian, pixels; ≤ 0 copies the channels out.
+    out : ndarray, shape (K, H, W), float32, optional
+        C-contiguous array to write into (e.g. part of a larger planar stack).
+
+    Returns
+    -------
+    ndarray, shape (K, H, W), float32
+    """
+    x = np.asarray(image, np.float32)
+    h, w, k = x.shape
+    if out is None:
+        out = np.empty((k, h, w), np.float32)
+    if sigma <= 0:
+        out[...] = np.moveaxis(x, -1, 0)
+        return out
+    _smooth_planar_kernel(x, _gaussian_taps(sigma), out)
     return out
 
 

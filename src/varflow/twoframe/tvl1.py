@@ -58,7 +58,7 @@ from ..ops.differences import (
 )
 from ..ops.fusion import noise_sigma_flat
 from ..ops.prox import prox_huber_conjugate, prox_linear_l1
-from ..ops.pyramid import resize_bilinear, smooth_image, smooth_image_fast
+from ..ops.pyramid import resize_bilinear, smooth_image, smooth_planes
 from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
 
 __all__ = [
@@ -808,9 +808,12 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
         gdx, gdy, w_grad = _gradient_inputs(f32[2], f32[3], params)
-        sigma, (i0x, i0y) = _reference_gradients(f32[0], params, state)
-        j1 = smooth_image_fast(np.concatenate([gdx, gdy], axis=2), sigma)
-        _gradient_channels_kernel(j1, i0x, i0y, inside, f32[4], w_grad, nc, ix, iy, a)
+        sigma, i0 = _reference_gradients(f32[0], params, state)
+        ng = gdx.shape[2]
+        j1 = np.empty((2 * ng,) + gdx.shape[:2], np.float32)
+        smooth_planes(gdx, sigma, out=j1[:ng])
+        smooth_planes(gdy, sigma, out=j1[ng:])
+        _gradient_channels_kernel(j1, i0, inside, planar(f32[4]), w_grad, nc, ix, iy, a)
     if params.data_normalisation > 0:
         scale = _normalisation(ix, iy, nc, w_grad, params.data_normalisation)
         ix *= scale
@@ -852,17 +855,21 @@ def _gradient_inputs(dx, dy, params: TVL1Params):
 
 
 def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "numba"):
-    """``(σ, (∂x J0, ∂y J0))`` of the level, cached in ``state["grad0"]``.
+    """``(σ, J0)`` of the level: the smoothed first-frame derivatives, cached in ``state``.
 
     Built by the very operations that give the second frame's side in
     :func:`data_channels` (the driver's :func:`~varflow.ops.differences.derivative_planes`,
     the channel mean of :func:`_gradient_inputs`, then the Gaussian of σ on the
     derivatives), so that two identical frames give gradient residuals of exactly
-    zero at zero flow.  ``engine="numpy"`` uses the NumPy references of those
-    operations.
+    zero at zero flow.  With ``engine="numba"`` ``J0`` is planar ``(2G, H, W)``
+    (``[∂x J0, ∂y J0]``, the layout of :func:`_gradient_channels_kernel`);
+    ``engine="numpy"`` uses the NumPy references of those operations and gives the
+    pair ``(∂x J0, ∂y J0)``, each ``(H, W, G)``.  Both cache under ``grad0``: a
+    level state serves one engine.
     """
     sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
-    if "grad0" not in state:
+    key = "grad0"  # one engine per state: the two cache different layouts
+    if key not in state:
         nc = I0.shape[2]
         if engine == "numba":
             planes = derivative_planes(I0)
@@ -870,50 +877,88 @@ def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "num
             planes = derivative_planes_numpy(I0)
         dx, dy, _ = _gradient_inputs(planes[..., nc:2 * nc], planes[..., 2 * nc:], params)
         g = dx.shape[2]
-        both = np.concatenate([dx, dy], axis=2)
-        j0 = smooth_image_fast(both, sigma) if engine == "numba" else smooth_image(both, sigma)
-        state["grad0"] = (np.ascontiguousarray(j0[..., :g]), np.ascontiguousarray(j0[..., g:]))
-    return sigma, state["grad0"]
+        if engine == "numba":
+            j0 = np.empty((2 * g,) + dx.shape[:2], np.float32)
+            smooth_planes(dx, sigma, out=j0[:g])
+            smooth_planes(dy, sigma, out=j0[g:])
+            state[key] = j0
+        else:
+            j0 = smooth_image(np.concatenate([dx, dy], axis=2), sigma)
+            state[key] = (np.ascontiguousarray(j0[..., :g]), np.ascontiguousarray(j0[..., g:]))
+    return sigma, state[key]
+
+
+@nb.njit(cache=True, fastmath=True, inline="always")
+def _gradient_pixel(ins, jx, jy, gx0, gy0, hxx, hxy1, hyx, hyy, u0, v0, wg):
+    """The two gradient-constancy channels of one pixel: ``(ix, iy, a)`` of the x
+    channel, then of the y channel (zero outside)."""
+    m = wg if ins else _F0
+    hxy = np.float32(0.5) * (hxy1 + hyx)
+    return (m * hxx, m * hxy, m * (jx - gx0 - hxx * u0 - hxy * v0),
+            m * hxy, m * hyy, m * (jy - gy0 - hxy * u0 - hyy * v0))
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
-def _gradient_channels_kernel(j1, i0x, i0y, inside, flow0, wg, k0, ix, iy, a):
+def _gradient_channels_kernel(j1, i0, inside, flow0, wg, k0, ix, iy, a):
     """Gradient-constancy channels ``k0 .. k0 + 2G`` of :func:`data_channels` in one pass.
 
-    ``j1`` (H, W, 2G): the smoothed warped derivatives ``[∂x J1w, ∂y J1w]`` of the
-    G channels the term is built from; their 5-point derivatives give the
-    (symmetrised) Hessian.
+    ``j1`` (2G, H, W): the smoothed warped derivatives ``[∂x J1w, ∂y J1w]`` of the
+    G channels the term is built from, planar; their 5-point derivatives give the
+    (symmetrised) Hessian.  ``i0`` (2G, H, W): the same of the first frame;
+    ``flow0`` (2, H, W).  The interior columns run on shifted row views (indexed
+    by the loop variable only, so the loop vectorises); the two columns at each
+    side use clamped indices.
     """
-    h, w, nc = i0x.shape
-    half = np.float32(0.5)
-    for i in nb.prange(h):
+    g2, h, w = j1.shape
+    ng = g2 // 2
+    for task in nb.prange(ng * h):
+        c = task // h
+        i = task - c * h
         im2, im1, ip1, ip2 = stencil5_indices(i, h)
-        for j in range(w):
-            if not inside[i, j]:
-                for c in range(k0, k0 + 2 * nc):
-                    ix[c, i, j] = 0.0
-                    iy[c, i, j] = 0.0
-                    a[c, i, j] = 0.0
-                continue
+        xr = j1[c, i]
+        yr = j1[ng + c, i]
+        xm2, xm1, xp1, xp2 = j1[c, im2], j1[c, im1], j1[c, ip1], j1[c, ip2]
+        ym2, ym1, yp1, yp2 = j1[ng + c, im2], j1[ng + c, im1], j1[ng + c, ip1], j1[ng + c, ip2]
+        gx0 = i0[c, i]
+        gy0 = i0[ng + c, i]
+        ins = inside[i]
+        u0 = flow0[0, i]
+        v0 = flow0[1, i]
+        kx = k0 + c
+        ky = k0 + ng + c
+        o1, o2, o3 = ix[kx, i], iy[kx, i], a[kx, i]
+        o4, o5, o6 = ix[ky, i], iy[ky, i], a[ky, i]
+        for j in list(range(min(2, w))) + list(range(max(w - 2, 2), w)):
             jm2, jm1, jp1, jp2 = stencil5_indices(j, w)
-            u0 = flow0[i, j, 0]
-            v0 = flow0[i, j, 1]
-            for c in range(nc):
-                cx = c
-                cy = nc + c
-                hxx = stencil5(j1[i, jm2, cx], j1[i, jm1, cx], j1[i, jp1, cx], j1[i, jp2, cx])
-                hxy1 = stencil5(j1[im2, j, cx], j1[im1, j, cx], j1[ip1, j, cx], j1[ip2, j, cx])
-                hyx = stencil5(j1[i, jm2, cy], j1[i, jm1, cy], j1[i, jp1, cy], j1[i, jp2, cy])
-                hyy = stencil5(j1[im2, j, cy], j1[im1, j, cy], j1[ip1, j, cy], j1[ip2, j, cy])
-                hxy = half * (hxy1 + hyx)
-                kx = k0 + c
-                ky = k0 + nc + c
-                ix[kx, i, j] = wg * hxx
-                iy[kx, i, j] = wg * hxy
-                a[kx, i, j] = wg * (j1[i, j, cx] - i0x[i, j, c] - hxx * u0 - hxy * v0)
-                ix[ky, i, j] = wg * hxy
-                iy[ky, i, j] = wg * hyy
-                a[ky, i, j] = wg * (j1[i, j, cy] - i0y[i, j, c] - hxy * u0 - hyy * v0)
+            r = _gradient_pixel(
+                ins[j], xr[j], yr[j], gx0[j], gy0[j],
+                stencil5(xr[jm2], xr[jm1], xr[jp1], xr[jp2]),
+                stencil5(xm2[j], xm1[j], xp1[j], xp2[j]),
+                stencil5(yr[jm2], yr[jm1], yr[jp1], yr[jp2]),
+                stencil5(ym2[j], ym1[j], yp1[j], yp2[j]),
+                u0[j], v0[j], wg)
+            o1[j], o2[j], o3[j], o4[j], o5[j], o6[j] = r
+        n = w - 4
+        if n <= 0:
+            continue
+        # column j = jj + 2 of the interior
+        xl2, xl1, xc, xr1, xr2 = xr[0:n], xr[1:n + 1], xr[2:n + 2], xr[3:n + 3], xr[4:n + 4]
+        yl2, yl1, yc, yr1, yr2 = yr[0:n], yr[1:n + 1], yr[2:n + 2], yr[3:n + 3], yr[4:n + 4]
+        xm2c, xm1c, xp1c, xp2c = xm2[2:n + 2], xm1[2:n + 2], xp1[2:n + 2], xp2[2:n + 2]
+        ym2c, ym1c, yp1c, yp2c = ym2[2:n + 2], ym1[2:n + 2], yp1[2:n + 2], yp2[2:n + 2]
+        gx0c, gy0c, insc = gx0[2:n + 2], gy0[2:n + 2], ins[2:n + 2]
+        u0c, v0c = u0[2:n + 2], v0[2:n + 2]
+        p1, p2, p3 = o1[2:n + 2], o2[2:n + 2], o3[2:n + 2]
+        p4, p5, p6 = o4[2:n + 2], o5[2:n + 2], o6[2:n + 2]
+        for jj in range(n):
+            r = _gradient_pixel(
+                insc[jj], xc[jj], yc[jj], gx0c[jj], gy0c[jj],
+                stencil5(xl2[jj], xl1[jj], xr1[jj], xr2[jj]),
+                stencil5(xm2c[jj], xm1c[jj], xp1c[jj], xp2c[jj]),
+                stencil5(yl2[jj], yl1[jj], yr1[jj], yr2[jj]),
+                stencil5(ym2c[jj], ym1c[jj], yp1c[jj], yp2c[jj]),
+                u0c[jj], v0c[jj], wg)
+            p1[jj], p2[jj], p3[jj], p4[jj], p5[jj], p6[jj] = r
 
 
 def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
