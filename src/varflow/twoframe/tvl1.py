@@ -696,23 +696,29 @@ def linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
 def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
+    """One task per channel and row: the row views let the loop run without a
+    per-pixel branch (the ``inside`` mask multiplies)."""
     h, w, nc = I0.shape
-    for i in nb.prange(h):
+    for task in nb.prange(nc * h):
+        c = task // h
+        i = task - c * h
+        r0 = I0[i, :, c]
+        r1 = I1w[i, :, c]
+        rx = I1w_dx[i, :, c]
+        ry = I1w_dy[i, :, c]
+        ins = inside[i]
+        u0 = flow0[i, :, 0]
+        v0 = flow0[i, :, 1]
+        ox = ix[c, i]
+        oy = iy[c, i]
+        oa = a[c, i]
         for j in range(w):
-            if inside[i, j]:
-                u0 = flow0[i, j, 0]
-                v0 = flow0[i, j, 1]
-                for c in range(nc):
-                    gx = I1w_dx[i, j, c]
-                    gy = I1w_dy[i, j, c]
-                    ix[c, i, j] = gx
-                    iy[c, i, j] = gy
-                    a[c, i, j] = I1w[i, j, c] - I0[i, j, c] - gx * u0 - gy * v0
-            else:
-                for c in range(nc):
-                    ix[c, i, j] = 0.0
-                    iy[c, i, j] = 0.0
-                    a[c, i, j] = 0.0
+            m = _F1 if ins[j] else _F0
+            gx = rx[j] * m
+            gy = ry[j] * m
+            ox[j] = gx
+            oy[j] = gy
+            oa[j] = (r1[j] - r0[j]) * m - gx * u0[j] - gy * v0[j]
 
 
 def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
