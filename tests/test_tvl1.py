@@ -9,11 +9,14 @@ import varflow
 from varflow.generators.pairs import TextureField, synthetic_pair
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe.tvl1 import (
+    _NO_TENSOR,
     PlainTVL1Params,
     TVL1Params,
+    _row_blocks,
     linearise,
     linearise_numpy,
     solve_warp,
+    tvl1_iterations,
 )
 
 
@@ -177,6 +180,34 @@ def test_progress_callback_counts_every_warp():
     varflow.flow(f0, f1, n_warps=2, callback=lambda d, t: calls.append((d, t)))
     total = calls[-1][1]
     assert [c[0] for c in calls] == list(range(1, total + 1)) and total % 2 == 0
+
+
+@pytest.mark.parametrize("aniso", [False, True])
+@pytest.mark.parametrize("h", [5, 9, 37])
+def test_two_iterations_per_pass_equal_single_passes_bit_for_bit(h, aniso):
+    # the kernel carries two iterations in one row wavefront (blocks of 1-9 rows here);
+    # one call of n iterations must equal n calls of one (the single-iteration pass)
+    rng = np.random.default_rng(h)
+    w, nc = 29, 3
+    ix, iy, a = (rng.normal(size=(nc, h, w)).astype(np.float32) * 0.1 for _ in range(3))
+    g = rng.uniform(0.05, 1.0, (h, w)).astype(np.float32)
+    tens = rng.uniform(0.2, 1.0, (3, h, w)).astype(np.float32) if aniso else _NO_TENSOR
+    if aniso:
+        tens[1] *= 0.3
+    runs = []
+    for n_calls, n_iter in ((1, 7), (7, 1)):
+        u = np.zeros((2, h, w), np.float32)
+        p = np.zeros((4, h, w), np.float32)
+        tp = np.zeros_like(p) if aniso else p
+        q = np.zeros((nc, h, w), np.float32)
+        for _ in range(n_calls):
+            tvl1_iterations(ix, iy, a, g, tens, u, p, tp, q, np.float32(15), np.float32(0.3),
+                            np.float32(0.25), n_iter, np.float32(0), 1, aniso, _row_blocks(h),
+                            np.float32(0.02))
+        runs.append((u, p, q))
+    assert np.abs(runs[0][0]).max() > 0.05  # it moved
+    for x, y in zip(*runs, strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 def test_linearise_engines_agree_on_the_drivers_strided_views():
