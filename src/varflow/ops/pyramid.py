@@ -114,68 +114,23 @@ def _gaussian_taps(sigma: float) -> np.ndarray:
     return (k / k.sum()).astype(np.float32)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def _smooth_kernel(x, taps, out):
-    """Separable smoothing of the rows and columns of (H, W, K), edges replicated.
-
-    The rows are read as flat ``W · K`` arrays: away from the left and right edges
-    the row pass needs no clamping, and both passes run along contiguous memory.
-    """
-    h, w, k = x.shape
-    r = taps.shape[0] // 2
-    m = w * k
-    xf = x.reshape(h, m)
-    of = out.reshape(h, m)
-    tmp = np.empty((h, m), np.float32)
-    lo = min(r, w) * k  # flat indices lo..hi-1: columns r..w-r-1
-    hi = max(w - r, lo // k) * k
-    for i in nb.prange(h):
-        src = xf[i]
-        dst = tmp[i]
-        for q in range(lo, hi):
-            acc = np.float32(0.0)
-            for t in range(2 * r + 1):
-                acc += taps[t] * src[q + (t - r) * k]
-            dst[q] = acc
-        for j in range(w):
-            if lo <= j * k < hi:
-                continue
-            for c in range(k):
-                acc = np.float32(0.0)
-                for t in range(-r, r + 1):
-                    jj = min(max(j + t, 0), w - 1)
-                    acc += taps[t + r] * src[jj * k + c]
-                dst[j * k + c] = acc
-    for i in nb.prange(h):
-        dst = of[i]
-        for q in range(m):
-            dst[q] = 0.0
-        for t in range(-r, r + 1):
-            ii = min(max(i + t, 0), h - 1)
-            wt = taps[t + r]
-            src = tmp[ii]
-            for q in range(m):
-                dst[q] += wt * src[q]
-
-
 def smooth_image_fast(image: np.ndarray, sigma: float) -> np.ndarray:
     """:func:`smooth_image` as a Numba kernel (same taps and edge handling, float32 sums).
 
-    σ ≤ 0 returns a C-contiguous float32 view or copy of ``image``.
+    :func:`smooth_planes` with the layout of the input, C-contiguous; σ ≤ 0 returns a
+    C-contiguous float32 view or copy of ``image``.
     """
     x = np.ascontiguousarray(image, np.float32)
     if sigma <= 0:
         return x
-    out = np.empty_like(x)
-    _smooth_kernel(x, _gaussian_taps(sigma), out)
-    return out
+    return np.ascontiguousarray(np.moveaxis(smooth_planes(x, sigma), 0, -1))
 
 
 @nb.njit(cache=True, parallel=True, fastmath=True)
 def _smooth_planar_kernel(x, taps, out):
-    """:func:`_smooth_kernel` from a (possibly strided) ``(H, W, K)`` view to planar
-    ``(K, H, W)`` output, summing in the same order (the rows are first copied,
-    edges replicated, into a padded buffer)."""
+    """Separable smoothing of the rows and columns of a (possibly strided) ``(H, W, K)``
+    view into planar ``(K, H, W)`` output, edges replicated (each row is first copied
+    into a buffer padded with its end values, so the row pass needs no clamping)."""
     h, w, k = x.shape
     r = taps.shape[0] // 2
     n = 2 * r + 1
@@ -209,11 +164,11 @@ def _smooth_planar_kernel(x, taps, out):
 
 
 def smooth_planes(image: np.ndarray, sigma: float, out: np.ndarray | None = None) -> np.ndarray:
-    """:func:`smooth_image_fast` with planar output: ``(H, W, K)`` in, ``(K, H, W)`` out.
+    """:func:`smooth_image` as a Numba kernel with planar output: ``(H, W, K)`` in,
+    ``(K, H, W)`` out (same taps and edge handling, float32 sums).
 
     ``image`` may be a strided view (e.g. some channels of a stack of warped
-    planes): it is read without a copy.  The sums are those of
-    :func:`smooth_image_fast`, term by term.
+    planes): it is read without a copy.
 
     Parameters
     ----------

@@ -383,19 +383,12 @@ def _primal_row(u, tp, i, k, d, theta):
 
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _project(px, py, lim):
-    nrm = math.sqrt(px * px + py * py)
-    s = lim / max(nrm, lim)
-    return px * s, py * s
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _shrink_project(zx, zy, lim, se):
     """``Π_{|p| ≤ lim}(z / (1 + se / lim))`` as ``z · lim / max(lim + se, |z|)``.
 
     One division and one square root: scaling ``z`` by ``h = lim / (lim + se)`` and
     then projecting onto the ball of radius ``lim`` multiplies it by
-    ``min(h, lim / |z|)``.  With ``se = 0`` it is :func:`_project`.
+    ``min(h, lim / |z|)``.  With ``se = 0`` the projection onto the ball.
     """
     s = lim / max(lim + se, math.sqrt(zx * zx + zy * zy))
     return zx * s, zy * s
@@ -617,7 +610,7 @@ def _project_dual(p, g):
             pyr = p[2 * k + 1, i]
             gr = g[i]
             for j in range(w):
-                px, py = _project(pxr[j], pyr[j], gr[j])
+                px, py = _shrink_project(pxr[j], pyr[j], gr[j], _F0)
                 pxr[j] = px
                 pyr[j] = py
 
@@ -806,10 +799,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     if params.gradient_weight > 0:
         gdx, gdy, w_grad = _gradient_inputs(f32[2], f32[3], params)
         sigma, i0 = _reference_gradients(f32[0], params, state)
-        ng = gdx.shape[2]
-        j1 = np.empty((2 * ng,) + gdx.shape[:2], np.float32)
-        smooth_planes(gdx, sigma, out=j1[:ng])
-        smooth_planes(gdy, sigma, out=j1[ng:])
+        j1 = _smoothed_stack(gdx, gdy, sigma)
         _gradient_channels_kernel(j1, i0, inside, planar(f32[4]), w_grad, nc, ix, iy, a)
     if params.data_normalisation > 0:
         scale = _normalisation(ix, iy, nc, w_grad, params.data_normalisation)
@@ -865,24 +855,32 @@ def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "num
     level state serves one engine.
     """
     sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
-    key = "grad0"  # one engine per state: the two cache different layouts
-    if key not in state:
+    if "grad0" not in state:
         nc = I0.shape[2]
         if engine == "numba":
             planes = derivative_planes(I0)
         else:
             planes = derivative_planes_numpy(I0)
         dx, dy, _ = _gradient_inputs(planes[..., nc:2 * nc], planes[..., 2 * nc:], params)
-        g = dx.shape[2]
         if engine == "numba":
-            j0 = np.empty((2 * g,) + dx.shape[:2], np.float32)
-            smooth_planes(dx, sigma, out=j0[:g])
-            smooth_planes(dy, sigma, out=j0[g:])
-            state[key] = j0
+            state["grad0"] = _smoothed_stack(dx, dy, sigma)
         else:
+            g = dx.shape[2]
             j0 = smooth_image(np.concatenate([dx, dy], axis=2), sigma)
-            state[key] = (np.ascontiguousarray(j0[..., :g]), np.ascontiguousarray(j0[..., g:]))
-    return sigma, state[key]
+            state["grad0"] = (np.ascontiguousarray(j0[..., :g]),
+                              np.ascontiguousarray(j0[..., g:]))
+    return sigma, state["grad0"]
+
+
+def _smoothed_stack(dx, dy, sigma: float) -> np.ndarray:
+    """``[G_σ * ∂x I, G_σ * ∂y I]`` as one planar ``(2G, H, W)`` stack (the layout of
+    :func:`_gradient_channels_kernel`) from two ``(H, W, G)`` arrays or views; both
+    frames' sides of the gradient term are built by it."""
+    ng = dx.shape[2]
+    out = np.empty((2 * ng,) + dx.shape[:2], np.float32)
+    smooth_planes(dx, sigma, out=out[:ng])
+    smooth_planes(dy, sigma, out=out[ng:])
+    return out
 
 
 @nb.njit(cache=True, fastmath=True, inline="always")
