@@ -60,7 +60,7 @@ import numpy as np
 
 from ..ops.fusion import fuse, repair, repair_margin, support_weights
 from ..ops.pyramid import pyramid_shapes
-from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids, prepare_pyramid
+from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids, guide_pyramid, prepare_pyramid
 from ..twoframe.large_displacement import LargeDisplacementParams, fusion_hook, matching_flow
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 from .track import TrackCallback
@@ -161,6 +161,7 @@ def propagate_trajectories(
     n_frames, height, width = frames.shape[:3]
     pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
     weights = support_weights(frames[ref], support_radius, support_gamma)
+    guide = guide_pyramid(frames[ref], params, [p.shape[:2] for p in pyrs[ref]])
     traj = np.zeros((n_frames, height, width, 2), np.float32)
     todo = [n for n in range(ref + 1, n_frames)] + [n for n in range(ref - 1, -1, -1)]
     n_flows = 0
@@ -174,14 +175,15 @@ def propagate_trajectories(
             prev2 = None if abs(n - ref) == 2 else traj[n - 2 * s]
             guess = extrapolate(traj[n - s], prev2)
             cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params,
-                                                 init_flow=guess, levels=levels))
+                                                 init_flow=guess, levels=levels,
+                                                 guide=guide))
         hook = None
         if ld_params is not None:
             dense = matching_flow(frames[ref], frames[n], ld_params)
             hook = None if dense is None else fusion_hook(dense, ld_params)
         if direct or not cands or hook is not None:
             cands.append(coarse_to_fine_pyramids(pyrs[ref], pyrs[n], solve_warp, params,
-                                                 level_hook=hook))
+                                                 level_hook=hook, guide=guide))
         n_flows += len(cands)
         if len(cands) > 1:
             flow, choice = fuse(frames[ref], frames[n], cands, weights)
