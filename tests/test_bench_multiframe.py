@@ -471,9 +471,10 @@ def test_cli_on_real_rubberwhale(capsys: pytest.CaptureFixture[str], data_root: 
 def test_rlr_defaults_beat_the_pair_on_rubberwhale(data_root: Path) -> None:
     """RubberWhale frame 11, full resolution and full iterations, default parameters.
 
-    Measured (2026-11-30, benchmarks/README.md): the TV-L1 pair 0.0994; RLR 0.0987
-    (the frames next to the reference keep a weak link on clean footage,
-    ``adjacent_link_factor``); 0.1305 when they take the full link τ = 2.
+    Measured (2026-12-01, benchmarks/README.md): the TV-L1 pair 0.0958; RLR 0.0952,
+    both with the weighted median (RLR 0.0987 without it); the frames next to the
+    reference keep a weak link on clean footage (``adjacent_link_factor``): 0.1305
+    (2026-11-30) when they take the full link τ = 2.
     """
     rows = bm.run_middlebury_multiframe(["rlr"], {}, progress=False, root=data_root,
                                         warm_up=False)

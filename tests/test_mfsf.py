@@ -88,6 +88,12 @@ def test_zero_weight_gives_the_decoupled_refinement_of_rlr(noisy_seq):
     s = noisy_seq
     frames = check_frames(s.frames)
     a = track_mfsf(frames, s.ref, MFSFParams(subspace_weight=0.0, n_warps=2))
+    b = track_rlr(frames, s.ref, RLRParams(link_weight=0.0, hidden_link_weight=0.0, n_warps=2,
+                                           weighted_median_radius=0))
+    np.testing.assert_array_equal(a, b)
+    # and with the weighted median in both (RLR's default)
+    a = track_mfsf(frames, s.ref, MFSFParams(subspace_weight=0.0, n_warps=2,
+                                             weighted_median_radius=3))
     b = track_rlr(frames, s.ref, RLRParams(link_weight=0.0, hidden_link_weight=0.0, n_warps=2))
     np.testing.assert_array_equal(a, b)
 
