@@ -48,7 +48,9 @@ def test_equally_sharp_pairs_are_untouched():
 
 
 def test_matching_improves_the_flow_of_a_half_blurred_pair():
-    # measured on this pair: 1.15 px without, 0.022 with (σ found 2.00 for the true 2)
+    # measured on this pair: 1.15 px without, 0.022 with (σ found 2.00 for the true 2);
+    # with the 2026-12-01 defaults (24 iterations, weighted median) 0.129 and 0.016
+    # (0.165 and 0.016 at 30 iterations)
     p = make_photo_pair("affine", 1)
     f1 = _blur(p.frame1, 2.0)
     err = []
@@ -58,4 +60,4 @@ def test_matching_improves_the_flow_of_a_half_blurred_pair():
                             sharpness_match=match, stats=stats)
         err.append(float(np.linalg.norm(flow - p.flow, axis=-1)[p.valid].mean()))
         assert ("blur_sigma" in stats) == match
-    assert err[1] < 0.05 and err[1] < 0.1 * err[0]
+    assert err[1] < 0.05 and err[1] < 0.25 * err[0]

@@ -156,7 +156,7 @@ _BAD_VALUES = {
     "huber": -0.1, "noise_reference": -0.01, "weighted_median_radius": -1,
     "weighted_median_sigma_space": 0.0, "weighted_median_sigma_colour": float("inf"),
     "weighted_median_threshold": -0.5, "weighted_median_sigma_divergence": float("nan"),
-    "weighted_median_noise": -1.0,
+    "weighted_median_noise": -1.0, "weighted_median_levels": -1,
 }
 
 

@@ -56,7 +56,7 @@ def test_tvl1_defaults_use_the_gradient_term_and_huber_tv():
     p = TVL1Params()
     assert (p.data_weight, p.gradient_weight, p.huber, p.edge_weight) == (15.0, 140.0, 0.02, 30.0)
     assert p.grey and p.sharpness_match and p.noise_reference == 0.01
-    assert p.texture_alpha == 0.3 and p.max_iterations == 30
+    assert p.texture_alpha == 0.3 and p.max_iterations == 24
 
 
 def test_zero_weights_reduce_exactly_to_plain_tvl1(gain_pair):

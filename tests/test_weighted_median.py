@@ -15,7 +15,7 @@ from varflow.ops.median import (
     weighted_median_flow,
     weighted_median_flow_numpy,
 )
-from varflow.twoframe.coarse_to_fine import noise_adapted
+from varflow.twoframe.coarse_to_fine import filter_flow, noise_adapted
 from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
 
@@ -177,6 +177,7 @@ def test_weighted_median_rejects_a_guide_of_another_size():
         ("weighted_median_threshold", -1.0),
         ("weighted_median_sigma_divergence", -0.1),
         ("weighted_median_noise", float("inf")),
+        ("weighted_median_levels", -2),
     ],
 )
 def test_params_name_the_bad_field(field, value):
@@ -190,6 +191,27 @@ def test_defaults():
     assert not TVL1Params().weighted_median_every_warp
     assert RLRParams().weighted_median_radius == 3
     assert TVL1Params().weighted_median_noise == 5.0
+    assert TVL1Params().weighted_median_levels == 3
+    assert RLRParams().weighted_median_levels == 0  # every level
+
+
+def test_levels_limit_where_it_applies():
+    p = _pair()
+    flow = varflow.flow(p.frame0, p.frame1, weighted_median_radius=0)
+    guide = p.frame0.astype(np.float32) / 255
+    params = TVL1Params(weighted_median_threshold=0.0)
+    plain = median_filter_flow(flow, params.median_size)
+    on = filter_flow(flow, params, guide, level=2)
+    off = filter_flow(flow, params, guide, level=3)
+    every = filter_flow(flow, params.replace(weighted_median_levels=0), guide, level=9)
+    np.testing.assert_array_equal(off, plain)
+    np.testing.assert_array_equal(on, every)
+    assert not np.array_equal(on, plain)
+    # and not after a warp other than the level's last (unless every warp is asked for)
+    np.testing.assert_array_equal(filter_flow(flow, params, guide, last_warp=False), plain)
+    np.testing.assert_array_equal(
+        filter_flow(flow, params.replace(weighted_median_every_warp=True), guide,
+                    last_warp=False), on)
 
 
 def test_noise_rule_widens_the_colour_sigma():

@@ -60,7 +60,12 @@ import numpy as np
 
 from ..ops.fusion import fuse, repair, repair_margin, support_weights
 from ..ops.pyramid import pyramid_shapes
-from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids, guide_pyramid, prepare_pyramid
+from ..twoframe.coarse_to_fine import (
+    coarse_to_fine_pyramids,
+    guide_pyramid,
+    prepare_pyramid,
+    working_channels,
+)
 from ..twoframe.large_displacement import LargeDisplacementParams, fusion_hook, matching_flow
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 from .track import TrackCallback
@@ -161,7 +166,8 @@ def propagate_trajectories(
     n_frames, height, width = frames.shape[:3]
     pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
     weights = support_weights(frames[ref], support_radius, support_gamma)
-    guide = guide_pyramid(frames[ref], params, [p.shape[:2] for p in pyrs[ref]])
+    guide = guide_pyramid(working_channels(frames[ref], params), params,
+                          [p.shape[:2] for p in pyrs[ref]])
     traj = np.zeros((n_frames, height, width, 2), np.float32)
     todo = [n for n in range(ref + 1, n_frames)] + [n for n in range(ref - 1, -1, -1)]
     n_flows = 0

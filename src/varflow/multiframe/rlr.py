@@ -1247,7 +1247,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
     del init  # not needed again; one (F, H, W, 2) array less at the peak
     p_all: np.ndarray | None = None
-    guide = guide_pyramid(frames[ref], params, shapes)
+    guide = guide_pyramid(working_channels(frames[ref], params), params, shapes)
     for level in range(n_run - 1, -1, -1):
         h, w = shapes[level]
         if traj.shape[1:3] != (h, w):
@@ -1301,7 +1301,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                 t_u += time.perf_counter() - t1
             for n in others:
                 traj[n] = filter_flow(traj[n], params, None if guide is None else guide[level],
-                                      last_warp=_k == params.n_warps - 1)
+                                      last_warp=_k == params.n_warps - 1, level=level)
             tick()
     traj[ref] = 0.0
     if params.final_repair:

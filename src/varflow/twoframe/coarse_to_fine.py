@@ -99,8 +99,9 @@ class CoarseToFineParams:
         σ_s of its spatial weight exp(-d²/(2σ_s²)), pixels.  Default 7.
     weighted_median_sigma_colour : float
         σ_c of its colour weight exp(-‖ΔI‖²/(2σ_c² C)), intensity units (frames in
-        [0, 1]; the guide is the first frame's colour channels at the level's size,
-        before the grey mean and the structure-texture step).  Default 0.05.
+        [0, 1]; the guide is the first frame's working channels at the level's
+        size, before the sharpness match and the structure-texture step: the
+        grey mean with ``grey``, else the colour channels).  Default 0.05.
     weighted_median_threshold : float
         The flow edges where it applies: ``Σ_k |∂x f_k| + |∂y f_k|`` at least this
         (pixels per pixel), grown by 2 pixels (:func:`varflow.ops.median.flow_edge_mask`);
@@ -119,6 +120,11 @@ class CoarseToFineParams:
         (RLR on a noisy synthetic clip, σ̂ ≈ 0.039: mean EPE 0.114 at k = 0, 0.076
         at 5, 0.080 without the weighted median; the tuning split, Middlebury and
         the small Sintel pairs move by less than 0.002 for k in 0–8).
+    weighted_median_levels : int
+        Apply the weighted median on the finest this many pyramid levels only
+        (each level costs 0.64 of the next finer one at η = 0.8, and the flow
+        edges of the coarse levels are rough anyway); 0: on every level.
+        Default 0 (``tvl1`` sets 3).
     weighted_median_every_warp : bool
         Apply the weighted median after every warp, as Sun, Roth & Black do,
         instead of after each level's last warp only; about five times its cost
@@ -163,6 +169,7 @@ class CoarseToFineParams:
     weighted_median_threshold: float = 0.5
     weighted_median_sigma_divergence: float = 0.3
     weighted_median_noise: float = 5.0
+    weighted_median_levels: int = 0
     weighted_median_every_warp: bool = False
     structure_texture: bool = True
     texture_alpha: float = 0.65
@@ -186,11 +193,9 @@ class CoarseToFineParams:
             "median_size",
             f"must be 0, 1 or an odd integer, got {self.median_size}",
         )
-        _check(
-            self.weighted_median_radius >= 0,
-            "weighted_median_radius",
-            f"must be >= 0, got {self.weighted_median_radius}",
-        )
+        for name in ("weighted_median_radius", "weighted_median_levels"):
+            value = getattr(self, name)
+            _check(value >= 0, name, f"must be >= 0, got {value}")
         for name in ("weighted_median_sigma_space", "weighted_median_sigma_colour"):
             value = getattr(self, name)
             _check(math.isfinite(value) and value > 0, name,
@@ -295,16 +300,18 @@ def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
 
 
 def filter_flow(flow: np.ndarray, params: CoarseToFineParams,
-                guide: np.ndarray | None, last_warp: bool = True) -> np.ndarray:
+                guide: np.ndarray | None, last_warp: bool = True, level: int = 0) -> np.ndarray:
     """The filtering of the flow after a warp: the plain median (``median_size``),
     and with ``weighted_median_radius`` > 0 the weighted median near motion
     boundaries, guided by ``guide`` ``(h, w, C)``, after a level's last warp
-    (``last_warp``) or every warp (see :class:`CoarseToFineParams`).
+    (``last_warp``) or every warp, on pyramid level ``level`` (0 = finest) if
+    it is one of the ``weighted_median_levels`` finest (see :class:`CoarseToFineParams`).
 
     Returns ``flow`` itself when both are off.
     """
     out = median_filter_flow(flow, params.median_size) if params.median_size > 1 else flow
-    if (params.weighted_median_radius > 0 and guide is not None
+    in_levels = params.weighted_median_levels == 0 or level < params.weighted_median_levels
+    if (params.weighted_median_radius > 0 and guide is not None and in_levels
             and (last_warp or params.weighted_median_every_warp)):
         out = weighted_median_flow(
             flow, guide, params.weighted_median_radius, params.weighted_median_sigma_space,
@@ -394,8 +401,8 @@ def coarse_to_fine(
     I0, I1 = check_pair(frame0, frame1)
     t_start = time.perf_counter()
     stats = {} if stats is None else stats
-    colour0 = I0
     I0, I1 = working_channels(I0, params), working_channels(I1, params)
+    guide_frame = I0  # before the sharpness match and the structure-texture step
     params = params.for_frames(I0, I1, stats)
     params = noise_adapted(params, (I0, I1), stats)
     if params.sharpness_match:
@@ -407,7 +414,7 @@ def coarse_to_fine(
         shapes = shapes[:levels]
     pyr0 = prepare_pyramid(I0, params, shapes)
     pyr1 = prepare_pyramid(I1, params, shapes)
-    guide = guide_pyramid(colour0, params, shapes)
+    guide = guide_pyramid(guide_frame, params, shapes)
     flow = coarse_to_fine_pyramids(pyr0, pyr1, solve_warp, params, init_flow, callback, stats,
                                    level_hook=level_hook, guide=guide)
     stats["seconds"] = time.perf_counter() - t_start
@@ -483,7 +490,7 @@ def coarse_to_fine_pyramids(
                 state,
             )
             flow = filter_flow(flow, params, guide[level] if guide is not None else i0,
-                               last_warp=k == n_warps - 1)
+                               last_warp=k == n_warps - 1, level=level)
             done += 1
             if callback is not None:
                 callback(done, total)
