@@ -79,9 +79,18 @@ class LargeDisplacementParams(TVL1Params):
     ``tvl1``'s 0.2677 (with the interpolation on at most 2**17 pixels and K = 32,
     chosen for speed in session 5; before, 2.15 px and 0.2719); the stages were
     tuned on the plain energy (2.16 px, Middlebury 0.287 against its 0.284).
+    Since ``tvl1`` took the weighted median (issue 11), ``tvl1-ld`` keeps it on
+    every level and the 30 iterations per warp that ``tvl1`` dropped to 24: tuning
+    split 1.81 px (1.98 with ``tvl1``'s 3 levels and 24 iterations, 1.88 with
+    every level and 24).
 
     Attributes
     ----------
+    weighted_median_levels : int
+        As in :class:`varflow.twoframe.coarse_to_fine.CoarseToFineParams`.
+        Default 0 (every level; ``tvl1`` 3).
+    max_iterations : int
+        As in :class:`TVL1Params`.  Default 30 (``tvl1`` 24).
     match_step : int
         d, spacing in pixels of the seed grid of the matching
         (:class:`varflow.ops.matching.MatchParams` ``step``).  Default 4 (3: tuning
@@ -145,6 +154,8 @@ class LargeDisplacementParams(TVL1Params):
     """
 
     n_warps: int = 3
+    weighted_median_levels: int = 0
+    max_iterations: int = 30
     match_step: int = 4
     match_levels: int = 4
     match_iterations: int = 6
