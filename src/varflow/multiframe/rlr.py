@@ -415,8 +415,9 @@ class RLRParams(MultiFrameParams):
         weighted median near motion boundaries after each level's last warp, in
         the initial two-frame flows and in the multi-frame refinement (every
         frame's displacement, guided by the reference frame).  Default 3, as
-        ``tvl1`` (RubberWhale frame-11 AEE 0.0952 against 0.0987 without; the
-        two-frame ``tvl1`` flow 0.0958).
+        ``tvl1`` but on every level (``weighted_median_levels`` 0) with the
+        colour guide (RubberWhale frame-11 AEE 0.0952 against 0.0987 without;
+        the two-frame ``tvl1`` flow 0.0970).
     """
 
     link_weight: float = 2.0

@@ -168,14 +168,15 @@ class TVL1Params(CoarseToFineParams):
     weighted_median_radius : int
         r of the weighted median near motion boundaries after each level's last
         warp (see :class:`CoarseToFineParams`, which also holds σ_s, σ_c, σ_d and
-        the edge threshold).  Default 3 (7 × 7 windows; tuning split and Middlebury, session
-        7 in benchmarks/README.md); 0 leaves the plain median alone.
+        the edge threshold).  Default 3 (7 × 7 windows; tuning split and
+        Middlebury, sessions 7-8 in benchmarks/README.md); 0 leaves the plain
+        median alone.
     weighted_median_levels : int
         The weighted median on the finest 3 levels only (see
-        :class:`CoarseToFineParams`): a fifth of its cost on the large-motion
-        Sintel pairs for Middlebury 0.254 → 0.257.  Default 3.
+        :class:`CoarseToFineParams`): 0.6 of its cost on the large-motion Sintel
+        pairs, for Middlebury 0.254 → 0.257.  Default 3.
     n_warps : int
-        Warps per level (see :class:`CoarseToFineParams`).  Default 4: with the
+        Number of warps (re-linearisations) per level.  Default 4: with the
         weighted median, 4 warps are as accurate as 5 on the tuning split and
         Middlebury, at 0.8 times the work.
     """
