@@ -18,6 +18,7 @@ import numpy as np
 from scipy import ndimage
 
 from ._median_network import median25
+from .fusion import _NO_REASSOC, _exp_neg_row
 
 __all__ = [
     "median_filter_flow",
@@ -386,7 +387,7 @@ def weighted_median_flow_numpy(
     return out
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, fastmath=True)
 def _weighted_median_padded(v, w, n, half):
     """Smallest v[a] with sum(w[v <= v[a]]) >= half, without branches on the data.
 
@@ -394,7 +395,8 @@ def _weighted_median_padded(v, w, n, half):
     with weight 0.  Each candidate's weight below it is a sum over all entries (a
     loop that vectorises); four candidates at a time keep four sums in flight.
     O(n²), faster than sorting or selecting for n up to about 100, where those lose
-    their time to mispredicted branches.
+    their time to mispredicted branches.  Compiled on its own (not inlined) with
+    ``reassoc``, which the sums need to vectorise and the caller's flags leave out.
     """
     best = np.float32(np.inf)
     zero = np.float32(0.0)
@@ -425,40 +427,17 @@ def _weighted_median_padded(v, w, n, half):
     return best
 
 
-#: 2^k for k = -126..0 (float32), the integer part of :func:`_exp_neg`.
-_POW2 = (2.0 ** np.arange(-126, 1)).astype(np.float32)
-
-
-@nb.njit(cache=True, inline="always")
-def _exp_neg(x, pow2):
-    """exp(-x) for x >= 0 in float32, relative error below 4e-6 down to 2^-126.
-
-    2^y with y = -x log2(e): the integer part from the table ``pow2`` (2^-126..2^0),
-    the fractional part by a degree-6 polynomial (least squares on [0, 1)); no call
-    into libm, so a loop of these vectorises.
-    """
-    y = max(x * np.float32(-1.4426950408889634), np.float32(-126.0))
-    k = np.floor(y)
-    f = y - k
-    p = np.float32(2.16906092e-4)
-    p = p * f + np.float32(1.24430815e-3)
-    p = p * f + np.float32(9.67847255e-3)
-    p = p * f + np.float32(5.54835247e-2)
-    p = p * f + np.float32(2.40229796e-1)
-    p = p * f + np.float32(6.93146987e-1)
-    p = p * f + np.float32(1.0)
-    return p * pow2[np.int64(k) + 126]
-
-
-@nb.njit(cache=True, parallel=True, fastmath=True)
-def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, pow2, out):
+@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, out):
     """Weighted median of planar ``src`` (K, H, W) into ``out`` at flat ``pixels``.
 
     ``guide`` is planar (C, H, W); ``vis`` (H, W) the neighbours' visibility
     factors; ``sw`` the (2r+1)² spatial weights, ``sc`` the colour scale
     1 / (2 σ_c² C).  Neighbours outside the frame do not vote (weight
     0).  The pixels are split in equal chunks, so edges bunched in a few rows do
-    not leave a thread idle.
+    not leave a thread idle.  The colour weights come from the vectorised exp of
+    :mod:`varflow.ops.fusion` (whose range reduction needs fast-math without
+    ``reassoc``, hence this kernel's flags).
     """
     k, h, w = src.shape
     nc = guide.shape[0]
@@ -470,11 +449,13 @@ def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, pow2, out):
     for t in nb.prange((m + chunk - 1) // chunk):
         vals = np.empty(n, np.float32)
         wts = np.empty(n, np.float32)
-        d2 = np.empty(n, np.float32)
+        d2 = np.empty(nn, np.float32)  # the colour exponents, -‖ΔI‖² sc
+        fac = np.empty(nn, np.float32)  # visibility x spatial weight, 0 outside the frame
+        e = np.empty(nn, np.float32)
+        bits = np.empty(nn, np.int32)
         for p in range(t * chunk, min(m, (t + 1) * chunk)):
             i = pixels[p] // w
             j = pixels[p] - i * w
-            tot = np.float32(0.0)
             if i >= radius and i + radius < h and j >= radius and j + radius < w:
                 # inside: row slices of the window, loops that vectorise
                 d2[:] = np.float32(0.0)
@@ -485,16 +466,13 @@ def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, pow2, out):
                         row = g[i - radius + di, j - radius : j + radius + 1]
                         q = di * side
                         for dj in range(side):
-                            e = row[dj] - g0
-                            d2[q + dj] += e * e
+                            dg = row[dj] - g0
+                            d2[q + dj] -= dg * dg * sc
                 for di in range(side):
                     vrow = vis[i - radius + di, j - radius : j + radius + 1]
                     q = di * side
                     for dj in range(side):
-                        d2[q + dj] = vrow[dj] * sw[q + dj] * _exp_neg(d2[q + dj] * sc, pow2)
-                for q in range(nn):
-                    wts[q] = d2[q]
-                    tot += d2[q]
+                        fac[q + dj] = vrow[dj] * sw[q + dj]
             else:
                 # near the border: neighbours outside the frame get weight 0
                 for di in range(side):
@@ -502,15 +480,19 @@ def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, pow2, out):
                         ii = i - radius + di
                         jj = j - radius + dj
                         q = di * side + dj
-                        wv = np.float32(0.0)
+                        d = np.float32(0.0)
+                        fac[q] = np.float32(0.0)
                         if 0 <= ii < h and 0 <= jj < w:
-                            d = np.float32(0.0)
                             for c in range(nc):
-                                e = guide[c, ii, jj] - guide[c, i, j]
-                                d += e * e
-                            wv = vis[ii, jj] * sw[q] * _exp_neg(d * sc, pow2)
-                        wts[q] = wv
-                        tot += wv
+                                dg = guide[c, ii, jj] - guide[c, i, j]
+                                d -= dg * dg * sc
+                            fac[q] = vis[ii, jj] * sw[q]
+                        d2[q] = d
+            _exp_neg_row(d2, e, bits)
+            tot = np.float32(0.0)
+            for q in range(nn):
+                wts[q] = fac[q] * e[q]
+                tot += wts[q]
             for q in range(nn, n):
                 wts[q] = np.float32(0.0)
             if not tot > 0:
@@ -602,6 +584,6 @@ def weighted_median_flow(
     vis = flow_visibility(np.moveaxis(src, 0, -1), sigma_divergence)
     _weighted_median_kernel(
         src, np.ascontiguousarray(np.moveaxis(g, -1, 0)), vis, pixels, int(radius),
-        _space_weights(radius, sigma_space), _colour_scale(sigma_colour, g.shape[2]), _POW2, out,
+        _space_weights(radius, sigma_space), _colour_scale(sigma_colour, g.shape[2]), out,
     )
     return np.moveaxis(out, 0, -1)
