@@ -1,6 +1,6 @@
 """Large displacements: ``tvl1-ld`` against ``tvl1``, OpenCV DIS and DeepFlow, and its stages.
 
-Part 1 runs :func:`varflow.evaluation.bench_twoframe.run_twoframe` on the large-motion
+Part 1 runs :func:`varflow.evaluation.bench.twoframe.run_twoframe` on the large-motion
 sets (the generator's pairs of :mod:`varflow.generators.large_pairs`, reporting split
 by default, and the MPI-Sintel pairs with mean motion above 10 px) and on Middlebury
 (where the motion is small and the large-displacement mode must cost nothing), with the
@@ -23,7 +23,7 @@ import argparse
 import statistics
 import time
 
-from varflow.evaluation.bench_twoframe import (
+from varflow.evaluation.bench.twoframe import (
     SINTEL_LARGE_PAIRS,
     format_twoframe_table,
     run_twoframe,

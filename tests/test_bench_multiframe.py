@@ -17,7 +17,7 @@ import pytest
 from _problems import to_u8, wave_texture
 
 from varflow import cli
-from varflow.evaluation import bench_multiframe as bm
+from varflow.evaluation.bench import multiframe as bm
 from varflow.generators.sequences import make_sequence
 from varflow.io import write_flo, write_image
 

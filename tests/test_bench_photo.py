@@ -10,7 +10,7 @@ import pytest
 
 import varflow
 from varflow import cli
-from varflow.evaluation.bench_trajectories import (
+from varflow.evaluation.bench.trajectories import (
     end_frames,
     far_epe,
     format_photo_table,

@@ -1,4 +1,4 @@
-"""Tests of the two-frame benchmark (varflow.evaluation.bench_twoframe), its peers and CLI.
+"""Tests of the two-frame benchmark (varflow.evaluation.bench.twoframe), its peers and CLI.
 
 The runner is exercised on a few tiny photographic pairs and on a fake data folder
 (small textured Middlebury / Sintel look-alikes written to a temporary directory),
@@ -23,8 +23,8 @@ pytest.importorskip("skimage")
 
 import varflow  # noqa: E402
 from varflow import cli  # noqa: E402
-from varflow.evaluation import bench_twoframe as bt  # noqa: E402
 from varflow.evaluation import peers as pe  # noqa: E402
+from varflow.evaluation.bench import twoframe as bt  # noqa: E402
 from varflow.evaluation.datasets import MIDDLEBURY_SEQUENCES  # noqa: E402
 from varflow.evaluation.metrics import evaluate  # noqa: E402
 from varflow.generators.photo_pairs import make_photo_pair  # noqa: E402

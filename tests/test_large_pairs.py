@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("skimage.data")
 
-from varflow.evaluation.bench_twoframe import (  # noqa: E402
+from varflow.evaluation.bench.twoframe import (  # noqa: E402
     DEFAULT_SETS,
     SETS,
     SINTEL_LARGE_PAIRS,

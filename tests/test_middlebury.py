@@ -17,7 +17,8 @@ import pytest
 
 import varflow
 from varflow import cli
-from varflow.evaluation import bench, datasets
+from varflow.evaluation import datasets
+from varflow.evaluation.bench import common, middlebury
 from varflow.evaluation.metrics import evaluate
 from varflow.twoframe.tvl1 import PlainTVL1Params
 
@@ -142,7 +143,7 @@ def _cells(table: str, label: str) -> list[str]:
 
 def test_format_table_single_method() -> None:
     rows = [_row("Venus", "tvl1", 0.30), _row("RubberWhale", "tvl1", 0.10)]
-    table = bench.format_table(rows)
+    table = middlebury.format_table(rows)
     header = _cells(table, "sequence")
     assert header == ["sequence", "tvl1 AEE", "tvl1 AAE", "tvl1 s", "book TV AEE"]
     assert _cells(table, "Venus")[1:] == ["0.3000", "3.000", "1.00", "0.2977"]
@@ -158,7 +159,7 @@ def test_format_table_single_method() -> None:
 def test_format_table_adds_columns_and_improvement_row() -> None:
     rows = [_row("Venus", "tvl1", 0.30), _row("Venus", "other", 0.24),
             _row("Grove2", "tvl1", 0.20), _row("Grove2", "other", 0.22)]
-    table = bench.format_table(rows)
+    table = middlebury.format_table(rows)
     header = _cells(table, "sequence")
     assert header[1:7] == ["tvl1 AEE", "tvl1 AAE", "tvl1 s", "other AEE", "other AAE", "other s"]
     assert [c for c in _cells(table, "mean")[1:7:3]] == ["0.2500", "0.2300"]
@@ -171,9 +172,9 @@ def test_format_table_adds_columns_and_improvement_row() -> None:
 
 def test_format_table_baseline_is_first_method_without_tvl1() -> None:
     rows = [_row("Venus", "tensor", 0.20), _row("Venus", "other", 0.19)]
-    improved = _cells(bench.format_table(rows), "% improved vs tensor")
+    improved = _cells(middlebury.format_table(rows), "% improved vs tensor")
     assert float(improved[4]) == pytest.approx(5.0, abs=0.05) and float(improved[1]) == 0.0
-    explicit = _cells(bench.format_table(rows, baseline="other"), "% improved vs other")
+    explicit = _cells(middlebury.format_table(rows, baseline="other"), "% improved vs other")
     assert float(explicit[1]) == pytest.approx(100 * (0.19 - 0.20) / 0.19, abs=0.05)
 
 
@@ -201,7 +202,7 @@ def test_bench_runner_and_cli(
         return np.nan_to_num(gt) + np.float32([0.3, 0.4])
 
     monkeypatch.setattr(varflow, "flow", fake_flow)
-    rows = bench.run_middlebury(["tvl1"], data_root, sequences=["venus"],
+    rows = middlebury.run_middlebury(["tvl1"], data_root, sequences=["venus"],
                                 overrides={"n_warps": 3}, progress=False)
     assert len(rows) == 1
     r = rows[0]
@@ -224,12 +225,12 @@ def test_bench_runner_and_cli(
         got = list(csv.DictReader(f))
     assert [(g["sequence"], g["method"]) for g in got] == [("Venus", "tvl1")]
     assert math.isclose(float(got[0]["aee"]), 0.5, abs_tol=1e-6)
-    assert list(got[0])[: len(bench.CSV_FIELDS)] == list(bench.CSV_FIELDS)
+    assert list(got[0])[: len(middlebury.CSV_FIELDS)] == list(middlebury.CSV_FIELDS)
     assert calls[-1][2].n_warps == 2
 
 
 def test_split_overrides() -> None:
-    assert bench.split_overrides(["tvl1"], {"data_weight": 3.0, "tvl1": {"n_warps": 2}}) == {
+    assert common.split_overrides(["tvl1"], {"data_weight": 3.0, "tvl1": {"n_warps": 2}}) == {
         "tvl1": {"data_weight": 3.0, "n_warps": 2}}
     with pytest.raises(ValueError, match="bogus"):
-        bench.split_overrides(["tvl1"], {"bogus": 1})
+        common.split_overrides(["tvl1"], {"bogus": 1})

@@ -35,7 +35,7 @@ from PIL import Image
 import varflow
 from varflow import cli
 from varflow.batch.manifest import MANIFEST_NAME, Manifest
-from varflow.evaluation.bench import write_csv
+from varflow.evaluation.bench.common import write_csv
 from varflow.io import write_flo, write_image, write_kitti_png
 from varflow.io.trajectories import write_trajectories
 from varflow.report.figures import HIDDEN_COLOUR, VISIBLE_COLOUR, error_map

@@ -126,7 +126,7 @@ def test_top_level_exports_resolve():
 
 
 def test_trajectory_benchmark_runner_and_table():
-    from varflow.evaluation.bench_trajectories import format_trajectory_table, run_trajectories
+    from varflow.evaluation.bench.trajectories import format_trajectory_table, run_trajectories
 
     rows = run_trajectories(["twoframe", "chain"], n_frames=5, shape=(40, 48),
                             scenes=["affine"], variants=["clean", "gaussian"], progress=False,

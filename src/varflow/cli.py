@@ -548,7 +548,7 @@ def _checked_methods(value: str, lookup, what: str) -> list[str]:
 
 def _write_rows(rows: list, csv_path) -> None:
     """Write benchmark rows to ``--csv`` when one was given."""
-    from varflow.evaluation.bench import write_csv
+    from varflow.evaluation.bench.common import write_csv
 
     if csv_path is not None:
         write_csv(rows, csv_path)
@@ -556,7 +556,7 @@ def _write_rows(rows: list, csv_path) -> None:
 
 
 def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench import format_table, run_middlebury
+    from varflow.evaluation.bench.middlebury import format_table, run_middlebury
     from varflow.evaluation.datasets import data_root
 
     methods = _checked_methods(args.methods, get_method, "method")
@@ -576,7 +576,7 @@ def _cmd_bench_middlebury(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench_trajectories import (
+    from varflow.evaluation.bench.trajectories import (
         PHOTO_SPLITS,
         check_photo_options,
         format_photo_table,
@@ -669,7 +669,7 @@ def _cmd_bench_trajectories(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench_twoframe import (
+    from varflow.evaluation.bench.twoframe import (
         PHOTO_FAMILIES,
         SETS,
         check_twoframe_data,
@@ -758,7 +758,7 @@ def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench_multiframe import (
+    from varflow.evaluation.bench.multiframe import (
         format_multiframe_table,
         run_middlebury_multiframe,
         run_sintel_multiframe,
@@ -797,7 +797,7 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_sintel_trajectories(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench_multiframe import (
+    from varflow.evaluation.bench.multiframe import (
         PROTOCOL_CLIP,
         PROTOCOL_PASS,
         format_multiframe_table,
@@ -1005,8 +1005,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_trajectories)
 
-    from .evaluation.bench_twoframe import DEFAULT_SETS as DEFAULT_SETS_TWOFRAME
-    from .evaluation.bench_twoframe import SETS as SETS_TWOFRAME
+    from .evaluation.bench.twoframe import DEFAULT_SETS as DEFAULT_SETS_TWOFRAME
+    from .evaluation.bench.twoframe import SETS as SETS_TWOFRAME
     from .evaluation.peers import PEERS
     from .generators.photo_pairs import FAMILIES as PAIR_FAMILIES
 
@@ -1046,7 +1046,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_param_flags(b, params)
     b.set_defaults(func=_cmd_bench_twoframe)
 
-    from .evaluation.bench_multiframe import default_methods
+    from .evaluation.bench.multiframe import default_methods
 
     mf_default = ",".join(default_methods())
     b = bsub.add_parser("middlebury-multiframe", parents=[common, bench_common],
@@ -1065,7 +1065,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_param_flags(b, tparams, n_methods=len(TRACKERS))
     b.set_defaults(func=_cmd_bench_middlebury_multiframe)
 
-    from .evaluation.bench_multiframe import PROTOCOL_METHODS, PROTOCOL_REFS, PROTOCOL_WINDOWS
+    from .evaluation.bench.multiframe import PROTOCOL_METHODS, PROTOCOL_REFS, PROTOCOL_WINDOWS
 
     st_default = ",".join(m for m in PROTOCOL_METHODS if m in TRACKERS)
     b = bsub.add_parser("sintel-trajectories", parents=[common, bench_common],

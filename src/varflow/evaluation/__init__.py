@@ -1,4 +1,11 @@
-"""Evaluation of flow estimates: error measures (AEE, AAE, RMS, outlier rates, photometric)."""
+"""Evaluation of flow estimates: error measures (AEE, AAE, RMS, outlier rates, photometric).
+
+What users import: :mod:`~varflow.evaluation.metrics` (re-exported here),
+:mod:`~varflow.evaluation.trajectory_metrics`, :mod:`~varflow.evaluation.datasets`
+(Middlebury and MPI-Sintel loaders) and :mod:`~varflow.evaluation.peers` (other
+libraries' methods).  The runners behind ``varflow bench`` are in
+:mod:`varflow.evaluation.bench`.
+"""
 
 from .metrics import (
     angular_error,

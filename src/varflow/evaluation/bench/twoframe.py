@@ -12,7 +12,7 @@ scikit-image TV-L1) on three sets:
     disjoint ``"reporting"`` seeds (100-102, for the numbers one quotes).
 ``"middlebury"``
     The 8 Middlebury "other" sequences with public ground truth, frame10 ->
-    frame11 (as :func:`varflow.evaluation.bench.run_middlebury`); no occlusion masks.
+    frame11 (as :func:`varflow.evaluation.bench.middlebury.run_middlebury`); no occlusion masks.
 ``"sintel"``
     The MPI-Sintel training pairs of :data:`SINTEL_PAIRS` found under the data
     folder (the snippets of ``../shared/data``); each is marked ``small`` or
@@ -54,21 +54,21 @@ from typing import Any
 
 import numpy as np
 
-from ..generators.large_pairs import large_pair_cases, make_large_pair
-from ..generators.photo_pairs import DEFAULT_SHAPE as PHOTO_SHAPE
-from ..generators.photo_pairs import FAMILIES as PHOTO_FAMILIES
-from ..generators.photo_pairs import SPLITS as PHOTO_SPLITS
-from ..generators.photo_pairs import make_photo_pair, photo_pair_cases
-from ..registry import get_method, make_params
-from .bench import _nanmean, _num, markdown_table, split_overrides, write_csv
-from .datasets import (
+from ...generators.large_pairs import large_pair_cases, make_large_pair
+from ...generators.photo_pairs import DEFAULT_SHAPE as PHOTO_SHAPE
+from ...generators.photo_pairs import FAMILIES as PHOTO_FAMILIES
+from ...generators.photo_pairs import SPLITS as PHOTO_SPLITS
+from ...generators.photo_pairs import make_photo_pair, photo_pair_cases
+from ...registry import get_method, make_params
+from ..datasets import (
     _HINT,
     MIDDLEBURY_SEQUENCES,
     data_root,
     load_middlebury_pair,
     load_sintel_pair,
 )
-from .peers import PEERS, peer_status
+from ..peers import PEERS, peer_status
+from .common import _nanmean, _num, markdown_table, split_overrides, write_csv
 
 __all__ = [
     "SETS",
@@ -430,14 +430,14 @@ def check_twoframe_data(
 
 def _warm_up_peer(name: str) -> None:
     """Run a peer once on a small synthetic pair (library start-up not timed)."""
-    from ..generators.pairs import synthetic_pair
+    from ...generators.pairs import synthetic_pair
 
     f0, f1, _ = synthetic_pair("translation", shape=(48, 64), magnitude=1.0, seed=0)
     PEERS[name](f0, f1)
 
 
 def _score(est: np.ndarray, pair: BenchPair) -> dict[str, Any]:
-    from .metrics import evaluate
+    from ..metrics import evaluate
 
     scores = evaluate(est, pair.gt, mask=pair.mask, occlusion=pair.occlusion)
     out: dict[str, Any] = {
@@ -502,7 +502,7 @@ def run_twoframe(
         Size of the photo pairs (default 256 x 320).
     overrides : mapping, optional
         Parameter overrides of the varflow methods; see
-        :func:`varflow.evaluation.bench.split_overrides`.
+        :func:`varflow.evaluation.bench.common.split_overrides`.
     progress : bool
         A tqdm bar on stderr (only on a terminal).
     warm_up : bool
@@ -533,7 +533,7 @@ def run_twoframe(
 
     import varflow
 
-    from .bench import _warm_up
+    from .common import _warm_up
 
     methods = list(methods)
     for m in methods:

@@ -32,13 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from ..generators.photo import _MAX_FRAMES as _PHOTO_MAX_FRAMES
-from ..generators.photo import _MIN_SIZE as _PHOTO_MIN_SIZE
-from ..generators.photo import FAMILIES, SPLITS, make_photo_clip, photo_cases
-from ..generators.sequences import SCENES, VARIANTS, benchmark_suite
-from ..registry import TRACKERS, get_tracker, make_track_params
-from .bench import _nanmean, _num, markdown_table, split_overrides
-from .trajectory_metrics import occlusion_accuracy, trajectory_errors
+from ...generators.photo import _MAX_FRAMES as _PHOTO_MAX_FRAMES
+from ...generators.photo import _MIN_SIZE as _PHOTO_MIN_SIZE
+from ...generators.photo import FAMILIES, SPLITS, make_photo_clip, photo_cases
+from ...generators.sequences import SCENES, VARIANTS, benchmark_suite
+from ...registry import TRACKERS, get_tracker, make_track_params
+from ..trajectory_metrics import occlusion_accuracy, trajectory_errors
+from .common import _nanmean, _num, markdown_table, split_overrides
 
 __all__ = [
     "run_trajectories",
@@ -63,7 +63,7 @@ def tracker_params(
 ) -> tuple[list[str], dict[str, Any]]:
     """Check trajectory method names and build each one's parameters.
 
-    ``overrides`` are distributed by :func:`varflow.evaluation.bench.split_overrides`.
+    ``overrides`` are distributed by :func:`varflow.evaluation.bench.common.split_overrides`.
 
     Returns
     -------

@@ -53,10 +53,8 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import TRACKERS
-from .bench import markdown_table
-from .bench_trajectories import tracker_params
-from .datasets import (
+from ...registry import TRACKERS
+from ..datasets import (
     _HINT,
     SINTEL_PASSES,
     _mask,
@@ -66,6 +64,8 @@ from .datasets import (
     data_root,
     load_middlebury_pair,
 )
+from .common import markdown_table
+from .trajectories import tracker_params
 
 __all__ = [
     "BASELINE_LABEL",
@@ -143,7 +143,7 @@ def load_rubberwhale_clip(
     ValueError
         Frames of different sizes, or frame10/11 differing from the pair loader's.
     """
-    from ..io.images import read_image
+    from ...io.images import read_image
 
     base = data_root(root)
     d = base / "middlebury" / "other-data" / "RubberWhale"
@@ -267,8 +267,8 @@ def sintel_snippets(
 def _load_snippet(
     s: SintelSnippet, root: Path
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
-    from ..io.flo import read_flo
-    from ..io.images import read_image
+    from ...io.flo import read_flo
+    from ...io.images import read_image
 
     tr = root / "sintel" / "training"
     what = f"Sintel {s.pass_}/{s.clip}"
@@ -317,7 +317,7 @@ def _warm_up(methods: Sequence[str], params: Mapping[str, Any], baseline: bool) 
     """Run every method once on a tiny synthetic clip so JIT compilation is not timed."""
     import varflow
 
-    from ..generators.pairs import synthetic_pair
+    from ...generators.pairs import synthetic_pair
 
     f0, f1, _ = synthetic_pair("translation", shape=(48, 64), magnitude=1.0, seed=0)
     if baseline:
@@ -331,7 +331,7 @@ def _warm_up(methods: Sequence[str], params: Mapping[str, Any], baseline: bool) 
 
 def _score(est: np.ndarray, gt: np.ndarray, valid: np.ndarray | None,
            occ: np.ndarray | None) -> dict[str, float]:
-    from .metrics import endpoint_error, evaluate
+    from ..metrics import endpoint_error, evaluate
 
     s = evaluate(est, gt, mask=valid)
     noc = None
@@ -403,7 +403,7 @@ def run_middlebury_multiframe(
         Names from :data:`varflow.registry.TRACKERS`; :func:`default_methods` when None.
     overrides : mapping, optional
         ``{field: value}`` applied to every method that has the field, or
-        ``{method: {field: value}}``; see :func:`varflow.evaluation.bench.split_overrides`.
+        ``{method: {field: value}}``; see :func:`varflow.evaluation.bench.common.split_overrides`.
         The baseline always uses the default ``tvl1`` parameters.
     progress : bool
         A tqdm bar on stderr (only on a terminal).
@@ -904,8 +904,8 @@ def _load_protocol_data(
 ) -> tuple[dict[int, np.ndarray], dict[int, tuple[np.ndarray, np.ndarray | None,
                                                   np.ndarray | None]]]:
     """Every frame the windows need (read once, uint8, cropped) and each reference's truth."""
-    from ..io.flo import read_flo
-    from ..io.images import read_image
+    from ...io.flo import read_flo
+    from ...io.images import read_image
 
     tr = base / "sintel" / "training"
     what = f"Sintel {pass_}/{clip}"
@@ -983,7 +983,7 @@ def run_sintel_trajectories(
         of :data:`PROTOCOL_METHODS` (``twoframe``, ``mfsf``, ``rlr``).
     overrides : mapping, optional
         ``{field: value}`` applied to every method that has the field, or
-        ``{method: {field: value}}``; see :func:`varflow.evaluation.bench.split_overrides`.
+        ``{method: {field: value}}``; see :func:`varflow.evaluation.bench.common.split_overrides`.
     progress : bool
         A tqdm bar on stderr (only on a terminal).
     root : path-like, optional
