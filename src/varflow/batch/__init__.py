@@ -22,8 +22,8 @@ runner
     The driver: resume rules, submission with bounded in-flight tasks.
 zarrsink
     The optional Zarr mirror (``--zarr``).
-command
-    The ``varflow batch`` sub-command.
+
+The ``varflow batch`` sub-command is :mod:`varflow.cli.batch`.
 """
 
 from __future__ import annotations

@@ -8,8 +8,9 @@ JavaScript and no external request.
 * :mod:`varflow.report.sources` loads the inputs,
 * :mod:`varflow.report.figures` makes the images,
 * :mod:`varflow.report.html` assembles the page,
-* :mod:`varflow.report.build` decides the content,
-* :mod:`varflow.report.command` is the ``varflow report`` sub-command.
+* :mod:`varflow.report.build` decides the content;
+
+the ``varflow report`` sub-command is :mod:`varflow.cli.report`.
 """
 
 from .build import DEFAULT_MAX_FRAMES, ReportInfo, build_report, render_report

@@ -1,4 +1,4 @@
-"""The ``varflow video`` command: a colour-coded flow video of a video.
+"""``varflow video``: a colour-coded flow video of a video.
 
 Synopsis::
 
@@ -26,11 +26,14 @@ import logging
 import math
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ..registry import METHODS, get_method
+from ._common import _check_output, _max_radius, _Progress
 
 __all__ = ["add_parser"]
 
@@ -39,7 +42,8 @@ log = logging.getLogger(__name__)
 _OUTPUT_SUFFIXES = (".mp4", ".mkv", ".avi")
 
 
-def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+def add_parser(sub: Any, common: argparse.ArgumentParser,
+               argv: Sequence[str] | None = None) -> None:
     """Register the ``video`` sub-command.
 
     Parameters
@@ -48,9 +52,9 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
         From ``parser.add_subparsers()``.
     common : argparse.ArgumentParser
         Parent parser with the options every command has (``-v``).
+    argv : sequence of str, optional
+        The command line (unused: ``video`` has no parameter flags).
     """
-    from ..registry import METHODS
-
     p = sub.add_parser(
         "video",
         parents=[common],
@@ -116,9 +120,7 @@ def _pairs(frames: Iterator[np.ndarray]) -> Iterator[tuple[np.ndarray, np.ndarra
 
 def _cmd_video(args: argparse.Namespace) -> int:
     import varflow
-    from varflow.cli import _check_output, _max_radius, _Progress
     from varflow.io.video import VideoReader, VideoWriter
-    from varflow.registry import get_method
 
     method = get_method(args.method)
     out = _check_output(args.output, _OUTPUT_SUFFIXES, "-o/--output")

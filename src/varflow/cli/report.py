@@ -1,20 +1,21 @@
-"""The ``varflow report`` sub-command.
+"""``varflow report``: a self-contained HTML page of results (:mod:`varflow.report`).
 
 Synopsis::
 
     varflow report PATH -o REPORT.html [--gt GT.flo] [--title T] [--max-frames N]
                    [--frames FRAME]
 
-Registered by :func:`add_parser` from :func:`varflow.cli.build_parser`; errors are
-raised as ``ValueError``/``OSError`` and become one ``varflow: error: ...`` line.
+Errors are raised as ``ValueError``/``OSError`` and become one ``varflow: error: ...``
+line.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from typing import Any
 
-from .build import DEFAULT_MAX_FRAMES, build_report
+from ..report.build import DEFAULT_MAX_FRAMES, build_report
 
 __all__ = ["add_parser", "run"]
 
@@ -38,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(sub: Any, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
+def add_parser(sub: Any, common: argparse.ArgumentParser,
+               argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """Add ``report`` to the sub-command parsers ``sub``.
 
     Parameters
@@ -47,6 +49,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> argparse.ArgumentPa
         From ``parser.add_subparsers``.
     common : ArgumentParser
         Parent parser with the options every command has (``-v``).
+    argv : sequence of str, optional
+        The command line (unused: ``report`` has no parameter flags).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""The ``varflow batch`` sub-command.
+"""``varflow batch``: flow or trajectories for many inputs on Dask (:mod:`varflow.batch`).
 
 Synopsis::
 
@@ -10,6 +10,9 @@ Synopsis::
                         [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
                         [--zarr] [--overwrite] [--quiet] [--<parameter> VALUE ...]
 
+Needs the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``);
+without it the command stops with one line naming the extra.
+
 Exit status: 0 when every task is done, 1 when some input or task failed (after
 all the others finished; the failures are listed on stderr and in the manifest),
 2 on an error that stops the run before it starts (one line on stderr).
@@ -19,10 +22,25 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["add_parser"]
+from ..registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
+from ._common import (
+    MissingExtraError,
+    _add_param_flags,
+    _collect_params,
+    _own_params,
+    _Parser,
+    _Progress,
+    chosen_methods,
+)
+
+__all__ = ["add_parser", "require_batch_extra"]
+
+#: The packages of the ``batch`` extra (``pip install "varflow[batch]"``).
+BATCH_EXTRA = ("dask", "distributed", "zarr")
 
 _DESCRIPTION = (
     "Compute flow between frame pairs (flow) or trajectories over windows of frames "
@@ -52,7 +70,26 @@ def _non_negative(text: str) -> int:
     return value
 
 
-def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+def require_batch_extra() -> None:
+    """Fail with one line naming the ``batch`` extra when its packages are missing.
+
+    Raises
+    ------
+    MissingExtraError
+        When dask, distributed or zarr cannot be imported.
+    """
+    import importlib
+
+    for name in BATCH_EXTRA:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            raise MissingExtraError(
+                'varflow batch needs dask, distributed and zarr: pip install "varflow[batch]"'
+            ) from None
+
+
+def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
     """Register ``varflow batch flow`` and ``varflow batch track``.
 
     Parameters
@@ -61,10 +98,10 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
         The sub-commands of ``varflow``.
     common : ArgumentParser
         Options every command has (``-v``).
+    argv : sequence of str, optional
+        The command line, to show the defaults of the ``--method`` it names in
+        ``--help``.
     """
-    from varflow.cli import _add_param_flags, _collect_params, _Parser
-    from varflow.registry import METHODS, TRACKERS
-
     p = sub.add_parser("batch", help="flow or trajectories for many videos on Dask",
                        description=_DESCRIPTION)
     bsub = p.add_subparsers(dest="batch_kind", metavar="KIND", required=True,
@@ -105,7 +142,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                    help="text file of pairs 'I J' (zero-based frame indices), one per line")
     f.add_argument("--format", choices=("flo", "png"), default="flo",
                    help="output format: Middlebury .flo or KITTI 16-bit .png (default flo)")
-    _add_param_flags(f, _collect_params())
+    _add_param_flags(f, _collect_params(), METHODS, chosen_methods(argv, METHODS))
     f.set_defaults(func=_cmd_batch_flow)
 
     t = bsub.add_parser("track", parents=[common, shared],
@@ -120,15 +157,13 @@ def add_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                    help="frames shared by consecutive windows (< F)")
     t.add_argument("--method", default="rlr", metavar="NAME",
                    help=f"one of: {', '.join(TRACKERS)} (default rlr)")
-    _add_param_flags(t, _collect_params(TRACKERS), n_methods=len(TRACKERS))
+    _add_param_flags(t, _collect_params(TRACKERS), TRACKERS, chosen_methods(argv, TRACKERS))
     t.set_defaults(func=_cmd_batch_track)
 
 
 def _cmd_batch_flow(args: argparse.Namespace) -> int:
-    from varflow.cli import _own_params
-    from varflow.registry import get_method, make_params
-
-    from .plan import BatchConfig, read_pairs_file
+    require_batch_extra()
+    from ..batch.plan import BatchConfig, read_pairs_file
 
     method = get_method(args.method)
     params = make_params(method, **_own_params(args, method, "method"))
@@ -139,10 +174,8 @@ def _cmd_batch_flow(args: argparse.Namespace) -> int:
 
 
 def _cmd_batch_track(args: argparse.Namespace) -> int:
-    from varflow.cli import _own_params
-    from varflow.registry import get_tracker, make_track_params
-
-    from .plan import BatchConfig
+    require_batch_extra()
+    from ..batch.plan import BatchConfig
 
     tracker = get_tracker(args.method)
     params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
@@ -155,10 +188,8 @@ _MAX_LISTED = 20
 
 
 def _run(args: argparse.Namespace, config: Any) -> int:
-    from varflow.cli import _Progress
-
-    from .inputs import expand_inputs
-    from .runner import run_batch
+    from ..batch.inputs import expand_inputs
+    from ..batch.runner import run_batch
 
     if args.scheduler and (args.workers is not None or args.threads_per_worker is not None):
         raise ValueError("--workers/--threads-per-worker set up a local cluster; leave them "

@@ -1,0 +1,5 @@
+"""``python -m varflow.cli``: the ``varflow`` command line."""
+
+from . import main
+
+raise SystemExit(main())

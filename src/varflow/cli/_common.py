@@ -1,0 +1,400 @@
+"""Pieces every ``varflow`` command shares.
+
+The parser class (one-line usage errors), the method-parameter flags generated from
+the parameter dataclasses (help with each method's defaults), the progress bar, the
+checks of output paths and the one-line error messages.  Nothing here runs a method.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import math
+import re
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from ..registry import METHODS, TRACKERS, get_method
+
+__all__ = ["PROG", "parameter_table"]
+
+log = logging.getLogger("varflow.cli")
+
+PROG = "varflow"
+_PARAM_PREFIX = "param__"
+
+
+class _CommandError(Exception):
+    """An error the CLI reports as its message alone (no exception type)."""
+
+
+class _UsageError(_CommandError):
+    """Raised by the parser instead of printing usage and exiting."""
+
+
+class MissingExtraError(_CommandError):
+    """A command needs packages of an optional extra that are not installed."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line instead of usage + message
+        raise _UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --------------------------------------------------------------------------- parameters
+
+
+@dataclasses.dataclass(frozen=True)
+class _FieldDoc:
+    name: str
+    symbol: str
+    meaning: str
+
+
+_SYMBOL = re.compile(
+    r"^(?P<sym>(?:[^\W\d_]{1,2}|[^\x00-\x7f]{1,2})(?:_[A-Za-z]{1,4})?)"
+    r"(?:,\s+|\s+(?=of\b))(?P<rest>.*)$",
+    re.S,
+)
+
+
+def _is_header(lines: list[str], i: int) -> bool:
+    """True if ``lines[i]`` is a numpydoc section title (the next line is dashes)."""
+    return i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}
+
+
+def _field_docs(cls: type) -> dict[str, _FieldDoc]:
+    """Parse the numpydoc ``Attributes`` sections of a dataclass and its bases.
+
+    Returns ``{field: _FieldDoc(name, symbol, meaning)}``; ``symbol`` is the paper
+    symbol when the description starts with one (``"λ, weight of ..."`` or
+    ``"c of the ..."``), and ``meaning`` drops "Default ..." sentences (the default
+    is taken from the dataclass itself).
+    """
+    out: dict[str, _FieldDoc] = {}
+    for klass in reversed(cls.__mro__):
+        doc = klass.__dict__.get("__doc__") or ""
+        lines = doc.expandtabs().splitlines()
+        in_attrs = False
+        current: str | None = None
+        buf: dict[str, list[str]] = {}
+        for i, line in enumerate(lines):
+            stripped = line.strip()
+            if stripped == "Attributes" and _is_header(lines, i):
+                in_attrs = True
+                continue
+            if not in_attrs or set(stripped) == {"-"}:
+                continue
+            indent = len(line) - len(line.lstrip())
+            m = re.match(r"^(\w+)\s*:", stripped)
+            if m and indent <= 4 and stripped:
+                current = m.group(1)
+                buf[current] = []
+            elif stripped and indent <= 4 and _is_header(lines, i):
+                in_attrs = False  # next section
+                current = None
+            elif current is not None and stripped:
+                buf[current].append(stripped)
+        for name, parts in buf.items():
+            sentences = re.split(r"(?<=\.)\s+", " ".join(parts))
+            text = " ".join(t for t in sentences if t and not t.startswith("Default")).strip()
+            sym = ""
+            m = _SYMBOL.match(text)
+            if m:
+                sym = m.group("sym")
+                if text[len(sym)] == ",":  # "λ, weight of ..." -> "Weight of ..."
+                    text = m.group("rest").strip()
+                    text = text[:1].upper() + text[1:]
+            out[name] = _FieldDoc(name, sym, text)
+    return out
+
+
+@dataclasses.dataclass
+class _Param:
+    name: str
+    type: type
+    default: Any  # of the first method that has the field
+    owners: list[str]
+    doc: _FieldDoc | None
+    defaults: dict[str, Any] = dataclasses.field(default_factory=dict)  # per owner
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+
+def _collect_params(registry: Mapping[str, Any] = METHODS) -> dict[str, _Param]:
+    """All scalar fields of all registered methods' parameter classes, in registry order.
+
+    Every field records the methods that have it (``owners``) and each one's default
+    (``defaults``).
+    """
+    params: dict[str, _Param] = {}
+    for mname, method in registry.items():
+        docs = _field_docs(method.params)
+        defaults = method.params()
+        for f in dataclasses.fields(method.params):
+            default = getattr(defaults, f.name)
+            if f.name in params:
+                params[f.name].owners.append(mname)
+                params[f.name].defaults[mname] = default
+                continue
+            kind = type(default)
+            if kind not in (bool, int, float, str):
+                log.debug("no CLI flag for %s.%s (type %s)", mname, f.name, kind.__name__)
+                continue
+            params[f.name] = _Param(f.name, kind, default, [mname], docs.get(f.name),
+                                    {mname: default})
+    return params
+
+
+def chosen_methods(argv: Sequence[str] | None, registry: Mapping[str, Any]) -> list[str] | None:
+    """The methods of ``registry`` named by ``--method`` / ``--methods`` in ``argv``.
+
+    Used to show those methods' defaults in ``--help``.  None when ``argv`` names
+    no method of ``registry`` (then the help gives every method's default).
+    """
+    names: list[str] = []
+    tokens = list(argv or ())
+    for k, tok in enumerate(tokens):
+        if tok == "--":
+            break
+        for opt in ("--method", "--methods"):
+            if tok == opt and k + 1 < len(tokens):
+                names += _split_list(tokens[k + 1])
+            elif tok.startswith(opt + "="):
+                names += _split_list(tok[len(opt) + 1:])
+    chosen = [n for n in dict.fromkeys(names) if n in registry]
+    return chosen or None
+
+
+def _method_names(names: Sequence[str], registry: Mapping[str, Any]) -> str:
+    """``names`` joined by commas, a whole family written ``sparse-*``.
+
+    A family is every registered name that starts with the same ``prefix-`` (at
+    least two of them); it is abbreviated only when all its members are in ``names``.
+    """
+    out: list[str] = []
+    done: set[str] = set()
+    for n in names:
+        if n in done:
+            continue
+        prefix = n.split("-")[0] + "-" if "-" in n else None
+        family = [m for m in registry if prefix and m.startswith(prefix)]
+        if len(family) >= 2 and set(family) <= set(names):
+            out.append(prefix + "*")
+            done.update(family)
+        else:
+            out.append(n)
+            done.add(n)
+    return ", ".join(out)
+
+
+def _defaults_text(p: _Param, methods: Sequence[str], registry: Mapping[str, Any]) -> str:
+    """``"default 4; tvl1-*: 3; tensor, sparse-*: 5"`` over ``methods`` that have ``p``.
+
+    The first group is the default of the first of ``methods`` having the field;
+    the others follow in registry order.  ``"; methods: ..."`` is added when only
+    some of ``methods`` have the field.
+    """
+    owners = [m for m in methods if m in p.defaults]
+    groups: dict[str, tuple[Any, list[str]]] = {}
+    for m in owners:
+        value = p.defaults[m]
+        groups.setdefault(repr(value), (value, []))[1].append(m)
+    (first, _), *others = groups.values()
+    text = f"default {first}"
+    for value, names in others:
+        text += f"; {_method_names(names, registry)}: {value}"
+    if len(owners) != len(methods):
+        text += f"; methods: {_method_names(owners, registry)}"
+    return text
+
+
+def _add_param_flags(
+    parser: argparse.ArgumentParser,
+    params: dict[str, _Param],
+    registry: Mapping[str, Any] = METHODS,
+    chosen: Sequence[str] | None = None,
+) -> None:
+    """Add one flag per parameter field; the help states the defaults.
+
+    Parameters
+    ----------
+    parser : ArgumentParser
+    params : dict
+        From :func:`_collect_params` of ``registry``.
+    registry : mapping
+        :data:`~varflow.registry.METHODS` or :data:`~varflow.registry.TRACKERS`.
+    chosen : sequence of str, optional
+        Methods named on the command line (:func:`chosen_methods`): the help gives
+        their defaults and hides the flags none of them has.  Without it, every
+        method's default where they differ.
+    """
+    methods = list(chosen) if chosen else list(registry)
+    if chosen:
+        which = _method_names(methods, registry)
+        description = (f"Fields of the parameter dataclass of {which}, with its defaults; "
+                       "only the flags you give are changed.")
+    else:
+        description = ("Fields of the methods' parameter dataclasses; only the flags you give "
+                       "are changed.  Defaults per method where they differ (give --method "
+                       "NAME before --help for one method's).")
+    group = parser.add_argument_group("method parameters", description)
+    for p in params.values():
+        meaning = p.doc.meaning if p.doc else ""
+        sym = f" [{p.doc.symbol}]" if p.doc and p.doc.symbol else ""
+        if any(m in p.defaults for m in methods):
+            text = f"{meaning}{sym} ({_defaults_text(p, methods, registry)})".replace("%", "%%")
+        else:
+            text = argparse.SUPPRESS  # not a field of the chosen methods
+        kwargs: dict[str, Any] = {"dest": _PARAM_PREFIX + p.name, "default": argparse.SUPPRESS,
+                                  "help": text}
+        if p.type is bool:
+            group.add_argument(p.flag, action=argparse.BooleanOptionalAction, **kwargs)
+        else:
+            group.add_argument(p.flag, type=p.type, metavar=p.type.__name__.upper(), **kwargs)
+
+
+def _given_params(args: argparse.Namespace) -> dict[str, Any]:
+    return {k[len(_PARAM_PREFIX):]: v for k, v in vars(args).items() if k.startswith(_PARAM_PREFIX)}
+
+
+def _params_note(overrides: Mapping[str, Any]) -> str:
+    """``"; parameters changed: a=1, b=2"`` for a benchmark header ("" when none)."""
+    if not overrides:
+        return ""
+    return "; parameters changed: " + ", ".join(f"{k}={v}" for k, v in sorted(overrides.items()))
+
+
+def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, Any]:
+    """The parameter flags given on the command line; each must be a field of ``entry``."""
+    given = _given_params(args)
+    own = {f.name for f in dataclasses.fields(entry.params)}
+    for name in given:
+        if name not in own:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} is not a parameter of {kind} {entry.name!r}")
+    return given
+
+
+def parameter_table(method: str, markdown: bool = False) -> str:
+    """Table of a method's parameters: name, CLI flag, paper symbol, default, meaning.
+
+    Parameters
+    ----------
+    method : str
+        A registered method name.
+    markdown : bool
+        Markdown table (as in the README) instead of aligned text.
+
+    Returns
+    -------
+    str
+    """
+    m = TRACKERS[method] if method in TRACKERS else get_method(method)
+    docs = _field_docs(m.params)
+    defaults = m.params()
+    rows = []
+    for f in dataclasses.fields(m.params):
+        d = docs.get(f.name)
+        rows.append((f.name, d.symbol if d and d.symbol else "", repr(getattr(defaults, f.name)),
+                     d.meaning if d else ""))
+    if markdown:
+        lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]
+        for name, sym, default, meaning in rows:
+            flag = "--" + name.replace("_", "-")
+            meaning = meaning.replace("|", "\\|")
+            lines.append(f"| `{name}` (`{flag}`) | {sym or '—'} | `{default}` | {meaning} |")
+        return "\n".join(lines)
+    wn = max(len(r[0]) for r in rows)
+    ws = max(len(r[1]) for r in rows)
+    wd = max(len(r[2]) for r in rows)
+    return "\n".join(
+        f"  {n:<{wn}}  {s or '-':<{ws}}  {d:>{wd}}  {t}" for n, s, d, t in rows
+    )
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+class _Progress:
+    """A tqdm bar on stderr fed by ``callback(done, total)``; off with --quiet or no TTY."""
+
+    def __init__(self, desc: str, quiet: bool, unit: str = "warp") -> None:
+        from tqdm import tqdm
+
+        enabled = not quiet and sys.stderr.isatty()
+        self.bar = tqdm(total=None, desc=desc, unit=unit, file=sys.stderr, disable=not enabled,
+                        leave=False)
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar.total != total:
+            self.bar.total = total
+        self.bar.update(done - self.bar.n)
+
+    def __enter__(self) -> _Progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.bar.close()
+
+
+def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
+    """Fail before any work when an output cannot be written."""
+    p = Path(path)
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise ValueError(f"{what}: {p} must end in {' or '.join(suffixes)}")
+    if suffixes is None:
+        from PIL import Image
+
+        if p.suffix.lower() not in Image.registered_extensions():
+            raise ValueError(f"{what}: {p} has no known image extension (use .png)")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(2, f"{what}: directory does not exist", str(parent))
+    if p.is_dir():
+        raise IsADirectoryError(21, f"{what}: is a directory", str(p))
+    return p
+
+
+def _max_radius(value: float | None) -> float | None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--max-radius: must be positive, got {value}")
+    return value
+
+
+def _magnitude(flow: np.ndarray) -> np.ndarray:
+    mag = np.hypot(flow[..., 0], flow[..., 1])
+    return mag[np.isfinite(mag)]
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(np.asarray(image, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _split_list(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        msg = f"{exc.strerror}: {exc.filename}"
+        if exc.filename2 is not None:
+            msg += f" -> {exc.filename2}"
+    else:
+        msg = str(exc) or type(exc).__name__
+    if not isinstance(exc, ValueError | OSError | _CommandError):
+        msg = f"{type(exc).__name__}: {msg}"
+    return " ".join(msg.split())
+
+
+def _fail(message: str) -> int:
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return 2

@@ -1,0 +1,139 @@
+"""``varflow track``: dense trajectories through a sequence.
+
+Synopsis::
+
+    varflow track FRAME... -o OUT.npz [--ref K] [--method NAME] [--warped DIR] [--png DIR]
+                  [--plot PLOT.png] [--plot-step PX] [--max-radius R] [--quiet]
+                  [--<parameter> VALUE ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..registry import TRACKERS, get_tracker, make_track_params
+from ._common import (
+    _add_param_flags,
+    _check_output,
+    _collect_params,
+    _magnitude,
+    _max_radius,
+    _own_params,
+    _Progress,
+    _to_uint8,
+    chosen_methods,
+)
+
+__all__ = ["add_parser"]
+
+log = logging.getLogger("varflow.cli")
+
+
+def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
+    """Register ``track``.
+
+    Parameters
+    ----------
+    sub : argparse sub-parsers action
+        The sub-commands of ``varflow``.
+    common : ArgumentParser
+        Options every command has (``-v``).
+    argv : sequence of str, optional
+        The command line, to show the defaults of the ``--method`` it names in
+        ``--help``.
+    """
+    p = sub.add_parser("track", parents=[common], help="dense trajectories through a sequence",
+                       description="Track every pixel of a reference frame through a sequence "
+                       "(frames as files, a directory or a video).")
+    p.add_argument("frames", nargs="+", metavar="FRAME",
+                   help="image files in order, or one directory of images or video file")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.npz",
+                   help="trajectories (F, H, W, 2), visibility (F, H, W), the reference "
+                   "index and metadata")
+    p.add_argument("--ref", type=int, default=None, metavar="K",
+                   help="reference frame index (default: the centre frame)")
+    p.add_argument("--method", default="rlr", metavar="NAME",
+                   help=f"one of: {', '.join(TRACKERS)} (default rlr)")
+    p.add_argument("--warped", metavar="DIR", help="write every frame warped back to the "
+                   "reference (warped_NNNN.png; points hidden in that frame greyed out)")
+    p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
+                   "frame (displacement_NNNN.png, one colour scale)")
+    p.add_argument("--plot", metavar="PLOT.png",
+                   help="draw sampled trajectories over the reference frame (grey where "
+                   "hidden)")
+    p.add_argument("--plot-step", type=int, default=16, metavar="PX",
+                   help="grid step of the plotted trajectories (default 16)")
+    p.add_argument("--max-radius", type=float, metavar="R",
+                   help="displacement of full colour saturation for --png (default: maximum)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_param_flags(p, _collect_params(TRACKERS), TRACKERS, chosen_methods(argv, TRACKERS))
+    p.set_defaults(func=_cmd_track)
+
+
+def _cmd_track(args: argparse.Namespace) -> int:
+    import varflow
+    from varflow.io import write_image
+    from varflow.io.trajectories import write_trajectories
+    from varflow.io.video import read_frames
+    from varflow.multiframe.track import check_frames, default_ref
+    from varflow.ops.warp import warp_bicubic
+    from varflow.viz import flow_to_color
+    from varflow.viz.plots import draw_trajectories, grey_out
+
+    tracker = get_tracker(args.method)
+    params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
+    out = _check_output(args.output, (".npz",), "-o/--output")
+    plot = _check_output(args.plot, None, "--plot") if args.plot else None
+    dirs = {}
+    for flag, value in (("--warped", args.warped), ("--png", args.png)):
+        if value:
+            d = Path(value)
+            d.mkdir(parents=True, exist_ok=True)
+            dirs[flag] = d
+    max_radius = _max_radius(args.max_radius)
+
+    source = args.frames[0] if len(args.frames) == 1 else args.frames
+    raw = read_frames(source)
+    frames = check_frames(raw)
+    ref = default_ref(frames.shape[0], args.ref)
+    n_f, h, w = frames.shape[:3]
+    log.info("%d frames %dx%d, reference %d, method %s", n_f, w, h, ref, tracker.name)
+    t0 = time.perf_counter()
+    with _Progress(tracker.name, args.quiet, unit="step") as progress:
+        traj, visible = varflow.track(frames, ref, tracker.name, params=params,
+                                      callback=progress, return_visibility=True)
+    seconds = time.perf_counter() - t0
+    meta = {"method": tracker.name, "params": dataclasses.asdict(params),
+            "frames": [str(f) for f in args.frames], "seconds": seconds}
+    write_trajectories(out, traj, ref=ref, visibility=visible, metadata=meta)
+    if "--warped" in dirs:
+        for n in range(n_f):
+            warped, _ = warp_bicubic(frames[n], traj[n])
+            write_image(dirs["--warped"] / f"warped_{n:04d}.png",
+                        grey_out(_to_uint8(np.squeeze(warped)), visible[n]))
+    mag = _magnitude(traj.reshape(-1, 1, 2))
+    if "--png" in dirs:
+        radius = max_radius or float(mag.max() or 1.0)
+        for n in range(n_f):
+            write_image(dirs["--png"] / f"displacement_{n:04d}.png",
+                        flow_to_color(traj[n], max_radius=radius))
+    if plot is not None:
+        write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step,
+                                            visibility=visible))
+    others = np.arange(n_f) != ref
+    hidden = float(1.0 - visible[others].mean()) if others.any() else 0.0
+    print(f"{tracker.name}: {n_f} frames {w}x{h}, reference {ref}, in {seconds:.2f} s, "
+          f"max |displacement| {mag.max():.3f} px, {100 * hidden:.1f}% hidden -> {out}")
+    for flag, d in dirs.items():
+        print(f"  {flag[2:]}: {d}")
+    if plot is not None:
+        print(f"  plot: {plot}")
+    return 0
