@@ -35,10 +35,9 @@ from typing import Any
 
 import numpy as np
 
+from ._version import __version__
 from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
 from .twoframe.coarse_to_fine import ProgressCallback, coarse_to_fine
-
-__version__ = "0.1.0"
 
 __all__ = [
     "__version__",

@@ -58,7 +58,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from .. import __version__
+from .._version import __version__
 from ._common import PROG, _fail, _one_line, _Parser, parameter_table
 from .flow import DEMO_MAGNITUDE, DEMO_SEED, DEMO_SHAPE
 

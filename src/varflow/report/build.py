@@ -693,7 +693,7 @@ def render_report(
     ValueError, OSError
         On a bad input or option (one-line messages).
     """
-    from .. import __version__
+    from .._version import __version__
 
     if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 1:
         raise ValueError(f"--max-frames: must be an integer >= 1, got {max_frames!r}")
