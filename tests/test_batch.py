@@ -330,6 +330,68 @@ def test_adopt_running_output(tmp_path: Path, videos: Path, scheduler: str,
     assert r["clip0/000001.flo"]["attempts"] == 2
 
 
+def test_fingerprint_of_the_numbers() -> None:
+    """The fingerprint covers method, every resolved parameter and the version only."""
+    params = make_params(get_method("tvl1-fast"))
+    cfg = BatchConfig("flow", "tvl1-fast", params)
+    fp = cfg.fingerprint("0.2.0")
+    assert len(fp) == 64 and fp == BatchConfig("flow", "tvl1-fast", params).fingerprint("0.2.0")
+    assert BatchConfig("flow", "tvl1-fast", params, stride=2).fingerprint("0.2.0") == fp
+    assert cfg.fingerprint("0.2.1") != fp
+    other = make_params(get_method("tvl1-fast"), n_warps=4)
+    assert BatchConfig("flow", "tvl1-fast", other).fingerprint("0.2.0") != fp
+    with Manifest(Path(":memory:")) as m:  # a recorded fingerprint is compared as well
+        ident = cfg.identity("0.2.0")
+        m.record_settings(ident, cfg.identity_hash("0.2.0"), None, fp)
+        assert m.meta()["fingerprint"] == fp
+        assert m.check_settings(ident, cfg.identity_hash("0.2.0"), fp) is None
+        assert m.check_settings(ident, cfg.identity_hash("0.2.0"), "0" * 64) is not None
+        diff = m.check_settings(cfg.identity("0.3.0"), cfg.identity_hash("0.3.0"),
+                                cfg.fingerprint("0.3.0"))
+        assert diff == "varflow version 0.2.0 -> 0.3.0"
+
+
+def test_resume_refused_after_version_or_parameter_change(
+    tmp_path: Path, videos: Path, scheduler: str, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An upgrade (another version) or other parameters: refused, one line; --overwrite runs."""
+    import varflow._version
+
+    out = tmp_path / "out"
+    args = ["batch", "flow", videos / "clip0.mkv", "-o", out, *FAST, "--scheduler", scheduler,
+            "-q"]
+    rc, _, err = run(capsys, *args)
+    assert rc == 0, err
+    before = outputs(out)
+    with Manifest(out / "manifest.sqlite") as m:
+        meta = m.meta()
+    assert meta["version"] == varflow.__version__ and len(meta["fingerprint"]) == 64
+    old = varflow.__version__
+    monkeypatch.setattr(varflow._version, "__version__", "99.0.0")
+    rc, stdout, err = run(capsys, *args)
+    assert rc == 2 and not stdout and len(err.splitlines()) == 1, err
+    assert err.startswith("varflow: error: ")
+    assert f"varflow version {old} -> 99.0.0" in err and "--overwrite" in err
+    assert outputs(out) == before and rows(out)["clip0/000000.flo"]["version"] == old
+    rc, _, err = run(capsys, *args, "--n-warps", "2")  # parameters and version differ
+    assert rc == 2 and "n_warps 3 -> 2" in err and "99.0.0" in err and "--overwrite" in err
+    monkeypatch.setattr(varflow._version, "__version__", old)
+    rc, _, err = run(capsys, *args, "--n-warps", "2")  # parameters only
+    assert rc == 2 and "n_warps 3 -> 2" in err and "version" not in err
+    monkeypatch.setattr(varflow._version, "__version__", "99.0.0")
+    rc, stdout, err = run(capsys, *args, "--overwrite")
+    assert rc == 0, err
+    assert "4 tasks: 4 done, 0 skipped" in stdout
+    assert {r["version"] for r in rows(out).values()} == {"99.0.0"}
+    with Manifest(out / "manifest.sqlite") as m:
+        meta_new = m.meta()
+    assert meta_new["version"] == "99.0.0" and meta_new["fingerprint"] != meta["fingerprint"]
+    assert outputs(out) == before  # same code, same numbers
+    rc, stdout, err = run(capsys, *args)  # and now it resumes
+    assert rc == 0 and "0 done, 4 skipped" in stdout, err
+
+
 def test_failing_inputs(tmp_path: Path, videos: Path, scheduler: str,
                         capsys: pytest.CaptureFixture[str]) -> None:
     from PIL import Image

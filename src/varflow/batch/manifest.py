@@ -25,7 +25,9 @@ Tables
 ``meta``
     ``key``/``value`` pairs: the run settings (``kind``, ``method``, ``params``,
     ``version``, ``format``, ``stride``/``pairs`` or ``window``/``overlap``), their
-    hash ``params_hash``, the last ``command`` line, ``created`` and ``updated``.
+    hash ``params_hash``, the ``fingerprint`` of what decides the numbers (SHA-256 of
+    the method, all its resolved parameters and the varflow version), the last
+    ``command`` line, ``created`` and ``updated``.
 """
 
 from __future__ import annotations
@@ -132,25 +134,42 @@ class Manifest:
                  for k, v in values.items()],
             )
 
-    def check_settings(self, identity: dict[str, Any], params_hash: str) -> str | None:
+    def check_settings(self, identity: dict[str, Any], params_hash: str,
+                       fingerprint: str | None = None) -> str | None:
         """Compare the run settings with those recorded.
+
+        Parameters
+        ----------
+        identity : dict
+            :meth:`varflow.batch.plan.BatchConfig.identity` of this run.
+        params_hash : str
+            Its hash (:meth:`~varflow.batch.plan.BatchConfig.identity_hash`).
+        fingerprint : str, optional
+            :meth:`~varflow.batch.plan.BatchConfig.fingerprint` of this run (method,
+            resolved parameters, varflow version), compared when one is recorded.
 
         Returns
         -------
         str or None
             None when the manifest is new or was written with the same settings,
-            else a short description of the differences.
+            else a short description of the differences (``varflow version 0.1.0
+            -> 0.2.0``, ``params: n_warps 3 -> 2``, ...).
         """
         meta = self.meta()
         old_hash = meta.get("params_hash")
-        if old_hash is None or old_hash == params_hash:
+        old_fingerprint = meta.get("fingerprint")
+        same_fingerprint = (fingerprint is None or old_fingerprint is None
+                            or old_fingerprint == fingerprint)
+        if old_hash is None or (old_hash == params_hash and same_fingerprint):
             return None
         diffs = []
         for key, value in identity.items():
             new = value if isinstance(value, str) else json.dumps(value, sort_keys=True)
             old = meta.get(key)
             if old != new:
-                if key == "params" and old is not None:
+                if key == "version":
+                    diffs.append(f"varflow version {old} -> {new}")
+                elif key == "params" and old is not None:
                     a, b = json.loads(old), value
                     keys = sorted(set(a) | set(b))
                     changed = [f"{k} {a.get(k)} -> {b.get(k)}" for k in keys
@@ -162,11 +181,13 @@ class Manifest:
         return "; ".join(diffs) or "settings differ"
 
     def record_settings(self, identity: dict[str, Any], params_hash: str,
-                        command: Any) -> None:
-        """Store the run settings, their hash and the command (its parsed options)."""
+                        command: Any, fingerprint: str | None = None) -> None:
+        """Store the run settings, their hash, the fingerprint and the command."""
         now = time.time()
         values: dict[str, Any] = dict(identity)
         values["params_hash"] = params_hash
+        if fingerprint is not None:
+            values["fingerprint"] = fingerprint
         values["command"] = json.dumps(command, sort_keys=True, default=str)
         values["updated"] = repr(now)
         if "created" not in self.meta():

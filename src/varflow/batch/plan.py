@@ -117,6 +117,18 @@ class BatchConfig:
             ident["overlap"] = self.overlap
         return ident
 
+    def fingerprint(self, version: str) -> str:
+        """SHA-256 of what decides the numbers: method, resolved parameters, version.
+
+        The canonical JSON (sorted keys) of ``{"method", "params", "version"}`` with
+        ``params`` every field of the resolved parameter dataclass
+        (:func:`dataclasses.asdict`).  Recorded in the manifest's ``meta`` table as
+        ``fingerprint``; a resume with another fingerprint is refused.
+        """
+        text = json.dumps({"method": self.method, "params": json.loads(self.params_json),
+                           "version": version}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
     def identity_hash(self, version: str) -> str:
         """SHA-256 of :meth:`identity` (the "params hash" of the manifest's meta table)."""
         text = json.dumps(self.identity(version), sort_keys=True)

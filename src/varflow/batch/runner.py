@@ -4,10 +4,14 @@ Resume rules (every run, in this order)
 ---------------------------------------
 1. **Settings.**  The run's settings (kind, method, parameters, varflow version,
    output format, stride/pairs or window/overlap; not the worker set-up nor
-   ``--zarr``) are hashed and kept in the manifest's ``meta`` table.  A run into an
-   output folder whose manifest records other settings stops with an error before
-   any work, unless ``overwrite``: then every output and Zarr store the manifest
-   lists is deleted and the manifest is emptied first.
+   ``--zarr``) are hashed and kept in the manifest's ``meta`` table, with the
+   fingerprint of what decides the numbers (method, all its resolved parameters,
+   varflow version: :meth:`~varflow.batch.plan.BatchConfig.fingerprint`).  A run
+   into an output folder whose manifest records other settings -- after an upgrade
+   of varflow too, since the version is bumped whenever default results change --
+   stops with an error naming the difference before any work, unless
+   ``overwrite``: then every output and Zarr store the manifest lists is deleted
+   and the manifest is emptied first.
 2. **Inputs.**  An input name whose recorded path or fingerprint (sizes and
    modification times of its files) differs from the current one while it has done
    tasks is an error too (same remedy).
@@ -470,25 +474,25 @@ def run_batch(
         Settings that differ from those of an earlier run into ``out``, a changed
         input, or ``out`` in use by another run.
     """
-    import varflow
+    from .._version import __version__ as version
 
-    version = varflow.__version__
     out = Path(os.fspath(out))
     out.mkdir(parents=True, exist_ok=True)
     summary = BatchSummary(unit="pairs" if config.kind == "flow" else "windows")
     identity = config.identity(version)
     params_hash = config.identity_hash(version)
+    fingerprint = config.fingerprint(version)
     with _locked(out), Manifest(out / MANIFEST_NAME) as manifest:
-        diff = manifest.check_settings(identity, params_hash)
+        diff = manifest.check_settings(identity, params_hash, fingerprint)
         if diff is not None and not overwrite:
             raise ValueError(
                 f"{out} holds results made with other settings ({diff}); use another -o "
-                "folder or --overwrite"
+                "folder or --overwrite (discards them)"
             )
         if overwrite:  # files first: a run killed in between can still --overwrite
             _discard(out, manifest.listed())
             manifest.reset()
-        manifest.record_settings(identity, params_hash, command)
+        manifest.record_settings(identity, params_hash, command, fingerprint)
         planned = _plan(inputs, config, manifest, out, version, summary, overwrite)
         _clean_stale(out, [pl.inp.name for pl in planned])
         sink = None
