@@ -23,7 +23,9 @@ runner
 zarrsink
     The optional Zarr mirror (``--zarr``).
 
-The ``varflow batch`` sub-command is :mod:`varflow.cli.batch`.
+The ``varflow batch`` sub-command is :mod:`varflow.cli.batch`.  This package needs
+the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``); the
+rest of varflow never imports them.
 """
 
 from __future__ import annotations
