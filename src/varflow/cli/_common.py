@@ -345,6 +345,23 @@ class _Progress:
         self.bar.close()
 
 
+def _compile_notice(method: str, quiet: bool) -> None:
+    """Say on stderr that this run compiles the kernels, when Numba's cache is cold.
+
+    Only when :func:`varflow._jit.kernels_cached` is sure they are not cached (the
+    first run of ``method`` on this machine); nothing with ``--quiet``.
+    """
+    if quiet:
+        return
+    from .._jit import compile_seconds, kernels_cached
+
+    if kernels_cached(method) is False:
+        seconds = compile_seconds(method)
+        about = f", about {seconds} s" if seconds else ""
+        print(f"{PROG}: compiling kernels, once per machine{about}", file=sys.stderr,
+              flush=True)
+
+
 def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
     """Fail before any work when an output cannot be written."""
     p = Path(path)

@@ -28,6 +28,7 @@ from ._common import (
     _add_param_flags,
     _check_output,
     _collect_params,
+    _compile_notice,
     _magnitude,
     _max_radius,
     _own_params,
@@ -67,7 +68,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                    help=f"one of: {', '.join(METHODS)} (default tvl1)")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="flow magnitude of full colour saturation (default: the maximum)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no compile notice")
     _add_param_flags(p, params, METHODS, chosen_methods(argv, METHODS))
     p.set_defaults(func=_cmd_flow)
 
@@ -94,7 +96,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                        "flow and colour images, prints the error.")
     p.add_argument("-o", "--output", default="varflow-demo", metavar="DIR",
                    help="output folder (default ./varflow-demo)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no compile notice")
     p.set_defaults(func=_cmd_demo)
 
 
@@ -121,6 +124,7 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     f1 = read_image(args.frame1)
     log.info("frames: %s %s, %s %s", f0.shape, f0.dtype, f1.shape, f1.dtype)
     log.info("parameters: %s", params)
+    _compile_notice(method.name, args.quiet)
     t0 = time.perf_counter()
     with _Progress(f"{method.name}", args.quiet) as progress:
         flow = varflow.flow(f0, f1, method.name, params=params, callback=progress)
@@ -217,6 +221,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     f0, f1, gt = synthetic_pair("smooth", shape=DEMO_SHAPE, magnitude=DEMO_MAGNITUDE,
                                 seed=DEMO_SEED)
     f0, f1 = _to_uint8(f0), _to_uint8(f1)  # exactly what frame0.png / frame1.png hold
+    _compile_notice("tvl1", args.quiet)
     t0 = time.perf_counter()
     with _Progress("demo", args.quiet) as progress:
         flow = varflow.flow(f0, f1, "tvl1", callback=progress)

@@ -24,6 +24,7 @@ from ._common import (
     _add_param_flags,
     _check_output,
     _collect_params,
+    _compile_notice,
     _magnitude,
     _max_radius,
     _own_params,
@@ -73,7 +74,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                    help="grid step of the plotted trajectories (default 16)")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="displacement of full colour saturation for --png (default: maximum)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no compile notice")
     _add_param_flags(p, _collect_params(TRACKERS), TRACKERS, chosen_methods(argv, TRACKERS))
     p.set_defaults(func=_cmd_track)
 
@@ -106,6 +108,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     ref = default_ref(frames.shape[0], args.ref)
     n_f, h, w = frames.shape[:3]
     log.info("%d frames %dx%d, reference %d, method %s", n_f, w, h, ref, tracker.name)
+    _compile_notice(tracker.name, args.quiet)
     t0 = time.perf_counter()
     with _Progress(tracker.name, args.quiet, unit="step") as progress:
         traj, visible = varflow.track(frames, ref, tracker.name, params=params,

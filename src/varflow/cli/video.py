@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..registry import METHODS, get_method
-from ._common import _check_output, _max_radius, _Progress
+from ._common import _check_output, _compile_notice, _max_radius, _Progress
 
 __all__ = ["add_parser"]
 
@@ -86,7 +86,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser,
                    help="encoder quality (CRF for libx264; lower is better)")
     p.add_argument("--no-legend", dest="legend", action="store_false",
                    help="no colour-wheel legend")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no compile notice")
     p.set_defaults(func=_cmd_video)
 
 
@@ -147,6 +148,7 @@ def _cmd_video(args: argparse.Namespace) -> int:
             return reader.iter_frames(args.start, args.stop, args.stride)
 
         peak = 0.0
+        _compile_notice(method.name, args.quiet)
         t0 = time.perf_counter()
         with (
             VideoWriter(out, fps, codec=args.codec, quality=args.quality) as writer,

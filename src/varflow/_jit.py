@@ -1,0 +1,117 @@
+"""Is Numba's cache of the kernels warm?  (The first run of a method compiles them.)
+
+Every kernel is ``@njit(cache=True)``: the first call of a method on a machine
+compiles its kernels (tens of seconds) and stores them in Numba's cache, and later
+runs load them in a fraction of a second.  Importing varflow compiles nothing (no
+kernel has an explicit signature and none is called at import time).
+
+:func:`kernels_cached` tells, cheaply (a few small files read, no compilation),
+whether the cache holds the representative kernels of a method for this machine,
+so that the command line can say why its first run is slow
+(:data:`COMPILE_SECONDS`).  It answers None when it cannot tell.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = ["COMPILE_SECONDS", "compile_seconds", "kernels_cached", "method_kernels"]
+
+log = logging.getLogger(__name__)
+
+#: Kernels (``"module:function"``) every two-frame and trajectory method compiles.
+SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_kernel")
+
+#: Representative kernels of each method beyond :data:`SHARED_KERNELS` (a method
+#: not listed is judged by the shared ones).
+METHOD_KERNELS: dict[str, tuple[str, ...]] = {
+    "tvl1": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.ops.median:_weighted_median_kernel"),
+    "tvl1-fast": ("varflow.twoframe.tvl1:tvl1_iterations",),
+    "tvl1-ld": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.ops.matching:_patchmatch_pair",
+                "varflow.ops.interpolation:_fit_kernel"),
+    "tensor": ("varflow.twoframe.tvl1:tvl1_iterations",),
+    "sparse-*": ("varflow.twoframe.sparse:nesterov_iterations",
+                 "varflow.sparse.omp:_batch_omp_kernel"),
+    "rlr": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.multiframe.rlr:ustep_iterations",
+            "varflow.multiframe.lowrank:_l1_kernel"),
+    "mfsf": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.multiframe.rlr:ustep_iterations"),
+    "twoframe": ("varflow.twoframe.tvl1:tvl1_iterations",),
+    "chain": ("varflow.twoframe.tvl1:tvl1_iterations",),
+}
+
+#: Rough seconds the first run of each method spends compiling on a cold cache (the
+#: first call on a small input with an empty cache, 2-core development machine).
+COMPILE_SECONDS: dict[str, int] = {
+    "tvl1": 40, "tvl1-fast": 35, "tvl1-ld": 60, "tensor": 35, "sparse-*": 60,
+    "rlr": 80, "mfsf": 70, "twoframe": 35, "chain": 40,
+}
+
+
+def _lookup(table: dict[str, Any], method: str) -> Any:
+    """``table[method]``, or the entry of its family (``"sparse-*"``); None if neither."""
+    if method in table:
+        return table[method]
+    family = method.split("-")[0] + "-*"
+    return table.get(family) if "-" in method else None
+
+
+def method_kernels(method: str) -> tuple[str, ...]:
+    """The kernels :func:`kernels_cached` checks for ``method`` (``"module:function"``)."""
+    return SHARED_KERNELS + tuple(_lookup(METHOD_KERNELS, method) or ())
+
+
+def compile_seconds(method: str) -> int | None:
+    """Rough seconds the first run of ``method`` spends compiling (None if unknown)."""
+    return _lookup(COMPILE_SECONDS, method)
+
+
+def _cached(dispatcher: Any) -> bool | None:
+    """Does Numba's cache hold a version of ``dispatcher`` for this machine?"""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    index_path = getattr(cache_file, "_index_path", None)
+    if index_path is None:  # caching off for this function, or another Numba
+        return None
+    if not os.path.exists(index_path):
+        return False
+    overloads = cache_file._load_index()  # {} when stale (source or Numba changed)
+    if not overloads:
+        return False
+    magic = dispatcher.targetctx.codegen().magic_tuple()  # target triple, CPU, features
+    return any(key[1] == magic for key in overloads)
+
+
+def kernels_cached(method: str | None = None,
+                   kernels: Sequence[str] | None = None) -> bool | None:
+    """Whether the first call of a method will load its kernels rather than compile.
+
+    Parameters
+    ----------
+    method : str, optional
+        A registered method or trajectory method: checks :func:`method_kernels`.
+    kernels : sequence of str, optional
+        Or these kernels, as ``"module:function"``.
+
+    Returns
+    -------
+    bool or None
+        True when Numba's cache (``NUMBA_CACHE_DIR``, else ``__pycache__`` next to
+        the sources, else Numba's per-user folder) holds every kernel checked,
+        compiled for this machine; False when one is missing or stale; None when it
+        cannot tell (caching off, a kernel not found, Numba internals changed).
+    """
+    names = tuple(kernels) if kernels is not None else method_kernels(method or "tvl1")
+    try:
+        answers = []
+        for name in names:
+            module, _, function = name.partition(":")
+            answers.append(_cached(getattr(importlib.import_module(module), function)))
+    except Exception as exc:  # noqa: BLE001 - unsure: say nothing rather than fail
+        log.debug("kernels_cached: cannot tell (%s: %s)", type(exc).__name__, exc)
+        return None
+    if any(a is None for a in answers):
+        return None
+    return all(answers)
