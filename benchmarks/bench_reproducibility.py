@@ -50,30 +50,6 @@ def _epe(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
     return float(d[ok].mean())
 
 
-def _fast_object_clip(n_frames: int = 5):
-    """The clip of tests/test_large_displacement.py: a disc 25 px per frame."""
-    from skimage import data as skdata
-
-    h, w, r = 128, 192, 20
-    bg, obj = skdata.coffee(), skdata.astronaut()
-    ref = n_frames // 2
-    yy, xx = np.mgrid[0:h, 0:w]
-    cx, cy = 96, 64
-    frames, traj = [], np.zeros((n_frames, h, w, 2), np.float32)
-    disc_ref = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
-    for n in range(n_frames):
-        k = n - ref
-        du, dv, ou, ov = k, k, 24 * k, -8 * k
-        f = bg[60 - dv: 60 - dv + h, 80 - du: 80 - du + w].copy()
-        disc = (xx - cx - ou) ** 2 + (yy - cy - ov) ** 2 <= r * r
-        f[disc] = obj[yy[disc] - ov + 100, xx[disc] - ou + 180]
-        frames.append(f)
-        traj[n, ..., 0], traj[n, ..., 1] = du, dv
-        traj[n][disc_ref] = (ou, ov)
-    vis = np.ones(traj.shape[:3], bool)
-    return np.stack(frames), traj, vis, ref
-
-
 def warm(args: argparse.Namespace) -> None:
     """Compile every kernel of the set into the cache on small inputs.
 
@@ -116,7 +92,10 @@ def save(path: str, args: argparse.Namespace) -> None:
         for fam in FAMILIES:
             c = make_photo_clip(fam, seed=100, n_frames=args.frames, shape=(h, w))
             clips.append((f"photo-{fam}", c.frames, c.trajectories, c.visibility, c.ref))
-        clips.append(("fast-object", *_fast_object_clip()))
+        from varflow.generators.large_pairs import fast_object_clip
+
+        frames, traj, _, ref = fast_object_clip()
+        clips.append(("fast-object", frames, traj, np.ones(traj.shape[:3], bool), ref))
         if not args.no_middlebury:
             from varflow.io import read_image
 

@@ -64,6 +64,7 @@ __all__ = [
     "SPLITS",
     "make_large_pair",
     "large_pair_cases",
+    "fast_object_clip",
 ]
 
 FAMILIES: tuple[str, ...] = ("objects", "camera")
@@ -203,3 +204,55 @@ def large_pair_cases(split: str, families: Sequence[str] = FAMILIES) -> list[tup
     list of (str, int)
     """
     return split_cases(split, families, FAMILIES, SPLITS)
+
+
+def fast_object_clip(
+    n_frames: int = 5,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A disc moving 25 px per frame over a photograph moving 1.4 px per frame.
+
+    The clip of the large-motion tracker tests and of
+    ``benchmarks/bench_reproducibility.py``: scikit-image's ``coffee`` shifted by
+    ``(k, k)`` px in frame ``ref + k``, and a disc of radius 20 cut from
+    ``astronaut`` that moves by ``(24 k, −8 k)`` px, farther than its own size
+    between the reference and the far frames (pasted, so it has no blur edge).
+
+    Parameters
+    ----------
+    n_frames : int
+        Number of frames F in ``[2, 7]``; the reference is ``F // 2``.
+
+    Returns
+    -------
+    frames : ndarray, shape (F, 128, 192, 3), uint8
+    trajectories : ndarray, shape (F, 128, 192, 2), float32
+        Exact displacements of the reference frame's pixels.
+    disc : ndarray, shape (128, 192), bool
+        The disc's pixels in the reference frame.
+    ref : int
+    """
+    n_frames = _check_int(n_frames, "n_frames", 2)
+    if n_frames > 7:
+        raise ValueError(f"n_frames: must be <= 7 (the disc leaves the frame), got {n_frames}")
+    from .photo import load_photo
+
+    def as_uint8(img: np.ndarray) -> np.ndarray:
+        return np.round(img * np.float32(255)).astype(np.uint8)
+
+    bg, obj = as_uint8(load_photo("coffee")), as_uint8(load_photo("astronaut"))
+    h, w, r = 128, 192, 20
+    ref = n_frames // 2
+    yy, xx = np.mgrid[0:h, 0:w]
+    cx, cy = 96, 64
+    disc_ref = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    frames, traj = [], np.zeros((n_frames, h, w, 2), np.float32)
+    for n in range(n_frames):
+        k = n - ref
+        du, dv, ou, ov = k, k, 24 * k, -8 * k
+        f = bg[60 - dv: 60 - dv + h, 80 - du: 80 - du + w].copy()
+        disc = (xx - cx - ou) ** 2 + (yy - cy - ov) ** 2 <= r * r
+        f[disc] = obj[yy[disc] - ov + 100, xx[disc] - ou + 180]
+        frames.append(f)
+        traj[n, ..., 0], traj[n, ..., 1] = du, dv
+        traj[n][disc_ref] = (ou, ov)
+    return np.stack(frames), traj, disc_ref, ref
