@@ -175,33 +175,10 @@ def test_wide_sweeps_find_a_small_fast_object(pair):
             assert np.median(err[on_disc]) < 0.5
 
 
-def _fast_object_clip(n_frames: int = 5):
-    """A disc moving 25 px per frame over a photograph moving 1.4 px per frame.
-
-    Returns the frames (F, H, W, 3) uint8, the exact trajectories of the centre
-    frame's pixels (F, H, W, 2), the disc's pixels in the centre frame and the centre.
-    """
-    h, w, r = 128, 192, 20
-    bg, obj = skdata.coffee(), skdata.astronaut()
-    ref = n_frames // 2
-    yy, xx = np.mgrid[0:h, 0:w]
-    cx, cy = 96, 64
-    disc_ref = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
-    frames, traj = [], np.zeros((n_frames, h, w, 2), np.float32)
-    for n in range(n_frames):
-        k = n - ref
-        du, dv, ou, ov = k, k, 24 * k, -8 * k
-        f = bg[60 - dv : 60 - dv + h, 80 - du : 80 - du + w].copy()
-        disc = (xx - cx - ou) ** 2 + (yy - cy - ov) ** 2 <= r * r
-        f[disc] = obj[yy[disc] - ov + 100, xx[disc] - ou + 180]
-        frames.append(f)
-        traj[n, ..., 0], traj[n, ..., 1] = du, dv
-        traj[n][disc_ref] = (ou, ov)
-    return np.stack(frames), traj, disc_ref, ref
-
-
 def test_tracker_far_frames_follow_a_fast_object_with_matching():
-    frames, gt, disc, ref = _fast_object_clip()
+    from varflow.generators.large_pairs import fast_object_clip
+
+    frames, gt, disc, ref = fast_object_clip()
     far = [0, frames.shape[0] - 1]
 
     def disc_epe(traj):
@@ -209,8 +186,12 @@ def test_tracker_far_frames_follow_a_fast_object_with_matching():
 
     plain = varflow.track(frames, ref, "rlr")
     guided = varflow.track(frames, ref, "rlr", propagate_matching=True)
-    # the disc (51 px away, radius 20) is lost: mean EPE 45 and 19 px on it (49 and 36
-    # without the weighted median); with matching 3.0 and 2.2 (11 and 12 without)
+    # the disc (51 px away, radius 20) is lost: mean EPE 45 and 19 px on it; with
+    # matching 0.46 and 2.27 px (host build), 0.46 and 1.74 (NUMBA_CPU_NAME=generic),
+    # at most 2.27 over the L-step seeds 0-2 and both builds (2026-12-01).  With a
+    # column sample of 20 * 2F = 200 the L-step's basis varied so much with the sample
+    # (and so with the last bits, through the k-means of its strata) that the same
+    # figures ranged 1.6-8.4 px over builds and seeds.
     assert min(disc_epe(plain)) > 15.0
     # the matching-guided initial trajectories find it in the far frames ...
     from varflow.multiframe.propagate import propagate_trajectories

@@ -39,7 +39,7 @@ def _rel(a, b):
 def solved(request):
     u, l0, s0 = _planted(seed=request.param)
     exact = rpca_exact(u)
-    linear = rpca_linear(u, seed=request.param)
+    linear = rpca_linear(u, n_samples=1200, seed=request.param)  # a sample of 20 M
     return u, l0, s0, exact, linear
 
 
@@ -91,6 +91,17 @@ def test_rpca_exact_float64_and_zero_matrix():
 
 
 # ------------------------------------------------------------------ linear-time PCP
+def test_default_sample_is_20_per_row_and_at_least_the_floor():
+    from varflow.multiframe.lowrank import DEFAULT_MIN_SAMPLES
+
+    rng = np.random.default_rng(0)
+    for m, n in ((10, 9000), (10, 3000), (240, 6000)):
+        u = rng.normal(size=(m, n)).astype(np.float32)
+        _, _, info = rpca_linear(u, max_iter=2, l1_max_iter=2)
+        assert info["n_samples"] == min(n, max(20 * m, DEFAULT_MIN_SAMPLES)), (m, n)
+    assert DEFAULT_MIN_SAMPLES == 4000
+
+
 def test_rpca_linear_agrees_with_exact_and_recovers(solved):
     _, l0, s0, (L, _, _), (Ll, Sl, info) = solved
     assert Ll.dtype == np.float32
@@ -98,7 +109,7 @@ def test_rpca_linear_agrees_with_exact_and_recovers(solved):
     assert _rel(Ll, l0) < 1e-3
     assert _rel(Sl, s0) < 1e-3
     assert info["rank"] == RANK
-    assert info["n_samples"] == min(N, 20 * M)
+    assert info["n_samples"] == 1200
     assert info["columns"].shape == (1200,) and np.unique(info["columns"]).size == 1200
     assert info["lam_sample"] == pytest.approx(info["lam"] * np.sqrt(N / 1200))
     assert info["l1_unconverged"] == 0

@@ -385,7 +385,8 @@ class RLRParams(MultiFrameParams):
         Default "linear".
     lowrank_samples : int
         Columns sampled by the linear L-step; 0 = the solver's default
-        (20 · 2F).  Default 0.
+        (``max(20 · 2F, 4000)``, :data:`varflow.multiframe.lowrank.DEFAULT_MIN_SAMPLES`).
+        Default 0.
     seed : int
         Seed of the L-step's column sampling (local generator).  Default 0.
     link_edge : bool
