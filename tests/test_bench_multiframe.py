@@ -468,20 +468,23 @@ def test_cli_on_real_rubberwhale(capsys: pytest.CaptureFixture[str], data_root: 
 
 
 @pytest.mark.data
-def test_rlr_defaults_beat_the_pair_on_rubberwhale(data_root: Path) -> None:
+def test_rlr_defaults_on_rubberwhale(data_root: Path) -> None:
     """RubberWhale frame 11, full resolution and full iterations, default parameters.
 
-    Measured (2026-12-01, benchmarks/README.md): the TV-L1 pair 0.0958; RLR 0.0952,
-    both with the weighted median (RLR 0.0987 without it); the frames next to the
-    reference keep a weak link on clean footage (``adjacent_link_factor``): 0.1305
-    (2026-11-30) when they take the full link τ = 2.
+    Measured (2026-12-01, benchmarks/README.md): the TV-L1 pair 0.0970 with both the
+    host build and NUMBA_CPU_NAME=generic; RLR 0.0959 / 0.0951.  The builds move RLR
+    by 0.0008, almost as much as its lead over the pair (0.0011-0.0019), so "RLR
+    beats the pair" is a benchmark figure (``varflow bench sintel-trajectories``),
+    not a test: this test bounds RLR within 3 % of the pair, which the full link on
+    the frames next to the reference breaks
+    (0.1305 at ``adjacent_link_factor=1``, 2026-11-30).
     """
     rows = bm.run_middlebury_multiframe(["rlr"], {}, progress=False, root=data_root,
                                         warm_up=False)
     rlr = next(r for r in rows if r["method"] == "rlr")
     pair = next(r for r in rows if r["method"] == bm.BASELINE_LABEL)
-    assert 0.095 < pair["aee"] < 0.103, pair
-    assert rlr["aee"] < pair["aee"], (rlr["aee"], pair["aee"])
+    assert 0.093 < pair["aee"] < 0.103, pair
+    assert rlr["aee"] < 1.03 * pair["aee"], (rlr["aee"], pair["aee"])
 
 
 def test_cli_sintel_trajectories(capsys: pytest.CaptureFixture[str], alley_root: Path,

@@ -234,7 +234,12 @@ def test_off_when_no_pixel_is_an_edge():
 def test_lower_error_at_motion_boundaries():
     # photographic objects moving over a photographic background: the error in a
     # 3-pixel band around the true motion boundaries (visible pixels) drops on every
-    # pair (measured with the defaults: 1.01 -> 0.40, 4.28 -> 3.69, 1.21 -> 0.88 px)
+    # pair, by about 30 % on average.  Measured (2026-12-01) with the host build /
+    # NUMBA_CPU_NAME=generic: 1.031 -> 0.648 / 1.012 -> 0.580, 4.402 -> 3.763 /
+    # 4.377 -> 3.894, 1.183 -> 0.686 / 1.183 -> 0.686 px: mean ratio 0.688 / 0.681.
+    # The second pair's ratio moves by 0.035 between the builds (0.855 / 0.890), so it
+    # is bounded by "lower" alone and the mean carries the size of the gain.
+    ratios = []
     for seed in (0, 1, 2):
         p = _pair(seed, (96, 128))
         edge = sum(np.abs(np.gradient(p.flow[..., c], axis=a)) for c in range(2) for a in range(2))
@@ -243,4 +248,6 @@ def test_lower_error_at_motion_boundaries():
         for radius in (0, 3):
             est = varflow.flow(p.frame0, p.frame1, weighted_median_radius=radius)
             err[radius] = float(np.linalg.norm(est - p.flow, axis=-1)[band].mean())
-        assert err[3] < 0.9 * err[0], (seed, err)
+        assert err[3] < err[0], (seed, err)
+        ratios.append(err[3] / err[0])
+    assert np.mean(ratios) < 0.78, ratios
