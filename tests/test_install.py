@@ -101,3 +101,22 @@ def test_batch_without_dask_in_a_fresh_process(tmp_path: Path) -> None:
         [sys.executable, "-c", pre + "raise SystemExit(main(['batch', 'flow', '--help']))"],
         capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and "--n-warps" in out.stdout, out.stderr
+
+
+def test_core_dependencies_leave_the_batch_stack_to_its_extra() -> None:
+    """``pip install -e .`` installs no dask, distributed or zarr (pyproject and metadata)."""
+    import re
+    import tomllib
+
+    heavy = {"dask", "distributed", "zarr"}
+
+    def name(req: str) -> str:
+        return re.split(r"[\s;<>=!~\[]", req, maxsplit=1)[0].lower()
+
+    project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml")
+                            .read_text(encoding="utf-8"))["project"]
+    assert not heavy & {name(r) for r in project["dependencies"]}
+    assert {name(r) for r in project["optional-dependencies"]["batch"]} == heavy
+    assert "varflow[batch]" in project["optional-dependencies"]["test"]
+    core = [r for r in importlib.metadata.requires("varflow") or [] if "extra ==" not in r]
+    assert core and not heavy & {name(r) for r in core}, core
