@@ -42,7 +42,10 @@ INFO logging on stderr.  Files are written atomically.
 Layout: :mod:`varflow.cli._common` holds what the commands share (parser, parameter
 flags, progress bar, output checks, one-line errors); every command group has its
 module with an ``add_parser(sub, common, argv)`` that registers its sub-commands
-(called by :func:`build_parser`, in the order of ``varflow --help``):
+(``sub``: the sub-parsers action of ``varflow``; ``common``: the parent parser of the
+options every command has, ``-v``; ``argv``: the command line, so that ``--help``
+can show the defaults of the ``--method``/``--methods`` it names), called by
+:func:`build_parser` in the order of ``varflow --help``:
 :mod:`~varflow.cli.flow` (flow, show, eval, demo, methods), :mod:`~varflow.cli.track`,
 :mod:`~varflow.cli.bench`, :mod:`~varflow.cli.video`, :mod:`~varflow.cli.batch` and
 :mod:`~varflow.cli.report`.  A new command (e.g. ``interpolate``, ``retime``) gets a

@@ -92,15 +92,8 @@ def require_batch_extra() -> None:
 def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
     """Register ``varflow batch flow`` and ``varflow batch track``.
 
-    Parameters
-    ----------
-    sub : argparse sub-parsers action
-        The sub-commands of ``varflow``.
-    common : ArgumentParser
-        Options every command has (``-v``).
-    argv : sequence of str, optional
-        The command line, to show the defaults of the ``--method`` it names in
-        ``--help``.
+    The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
+    ``common`` and ``argv`` are).
     """
     p = sub.add_parser("batch", help="flow or trajectories for many videos on Dask",
                        description=_DESCRIPTION)

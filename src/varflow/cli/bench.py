@@ -42,15 +42,8 @@ __all__ = ["add_parser"]
 def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
     """Register ``bench`` and its benchmarks.
 
-    Parameters
-    ----------
-    sub : argparse sub-parsers action
-        The sub-commands of ``varflow``.
-    common : ArgumentParser
-        Options every command has (``-v``).
-    argv : sequence of str, optional
-        The command line, to show the defaults of the ``--methods`` it names in
-        ``--help``.
+    The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
+    ``common`` and ``argv`` are).
     """
     params = _collect_params()
     tparams = _collect_params(TRACKERS)

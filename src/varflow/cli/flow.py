@@ -46,15 +46,8 @@ log = logging.getLogger("varflow.cli")
 def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
     """Register ``flow``, ``show``, ``eval``, ``demo`` and ``methods``.
 
-    Parameters
-    ----------
-    sub : argparse sub-parsers action
-        The sub-commands of ``varflow``.
-    common : ArgumentParser
-        Options every command has (``-v``).
-    argv : sequence of str, optional
-        The command line, to show the defaults of the ``--method`` it names in
-        ``--help``.
+    The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
+    ``common`` and ``argv`` are).
     """
     params = _collect_params()
     p = sub.add_parser("flow", parents=[common], help="estimate the flow between two frames",
