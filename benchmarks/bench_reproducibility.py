@@ -44,10 +44,19 @@ DEFAULT_METHODS = "tvl1,tvl1-fast,tvl1-ld,tensor,sparse-dct"
 DEFAULT_TRACKERS = "rlr,mfsf,twoframe"
 
 
-def _epe(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
-    d = np.hypot(a[..., 0] - b[..., 0], a[..., 1] - b[..., 1])
-    ok = np.isfinite(d) if mask is None else (np.isfinite(d) & mask)
-    return float(d[ok].mean())
+def _planes(traj: np.ndarray) -> np.ndarray:
+    """A flow ``(H, W, 2)`` as it is, trajectories ``(F, H, W, 2)`` as ``(F·H, W, 2)``."""
+    return traj.reshape(-1, *traj.shape[-2:])
+
+
+def _child_args(args: argparse.Namespace) -> list[str]:
+    """The options of this run that decide the result set, for the child processes."""
+    out = ["--methods", args.methods, "--trackers", args.trackers,
+           "--frames", str(args.frames), "--shape", args.shape]
+    if args.data:
+        out += ["--data", args.data]
+    out += ["--no-middlebury"] * args.no_middlebury + ["--no-clips"] * args.no_clips
+    return out
 
 
 def warm(args: argparse.Namespace) -> None:
@@ -79,10 +88,9 @@ def save(path: str, args: argparse.Namespace) -> None:
     if not args.no_middlebury:
         root = data_root(args.data)
         for seq in MIDDLEBURY_SEQUENCES:
-            f0, f1, gt = load_middlebury_pair(seq, root)
+            f0, f1, out[f"gt/mdb/{seq}"] = load_middlebury_pair(seq, root)
             for m in args.methods.split(","):
                 out[f"mdb/{m}/{seq}/flow"] = varflow.flow(f0, f1, m)
-                out[f"mdb/{m}/{seq}/gt"] = gt
             print(f"  {seq} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
     if not args.no_clips:
         from varflow.generators.photo import FAMILIES, make_photo_clip
@@ -108,13 +116,11 @@ def save(path: str, args: argparse.Namespace) -> None:
             vis[4] = np.isfinite(gt[..., 0])
             clips.append(("rubberwhale", frames, traj, vis, 3))
         for name, frames, traj, vis, ref in clips:
+            out[f"gt/clip/{name}"], out[f"mask/clip/{name}"] = traj, vis
             for m in args.trackers.split(","):
                 if name == "rubberwhale" and m != "rlr":
                     continue
-                res = varflow.track(frames, ref, m)
-                out[f"clip/{m}/{name}/flow"] = res
-                out[f"clip/{m}/{name}/gt"] = traj
-                out[f"clip/{m}/{name}/mask"] = vis
+                out[f"clip/{m}/{name}/flow"] = varflow.track(frames, ref, m)
             print(f"  {name} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
     tmp = path + ".tmp.npz"
     np.savez_compressed(tmp, **out)
@@ -123,10 +129,12 @@ def save(path: str, args: argparse.Namespace) -> None:
 
 def compare(a_path: str, b_path: str, labels: tuple[str, str] = ("host", "generic")) -> str:
     """The table of differences between two ``--save`` files."""
+    from varflow.evaluation.metrics import endpoint_error, endpoint_error_map
+
     a, b = np.load(a_path), np.load(b_path)
     groups: dict[tuple[str, str], list[str]] = {}
     for key in a.files:
-        kind, method, case, what = key.split("/")
+        kind, method, case, what = (key.split("/") + [""])[:4]
         if what == "flow":
             groups.setdefault((kind, method), []).append(case)
     lines = [
@@ -137,12 +145,12 @@ def compare(a_path: str, b_path: str, labels: tuple[str, str] = ("host", "generi
     for (kind, method), cases in groups.items():
         sa, sb, p99, pmax = [], [], [], []
         for case in cases:
-            fa, fb = a[f"{kind}/{method}/{case}/flow"], b[f"{kind}/{method}/{case}/flow"]
-            gt = a[f"{kind}/{method}/{case}/gt"]
-            mask = a[f"{kind}/{method}/{case}/mask"] if kind == "clip" else None
-            sa.append(_epe(fa, gt, mask))
-            sb.append(_epe(fb, gt, mask))
-            d = np.hypot(fa[..., 0] - fb[..., 0], fa[..., 1] - fb[..., 1])
+            fa, fb = (_planes(f[f"{kind}/{method}/{case}/flow"]) for f in (a, b))
+            gt = _planes(a[f"gt/{kind}/{case}"])
+            mask = a[f"mask/{kind}/{case}"].reshape(gt.shape[:2]) if kind == "clip" else None
+            sa.append(endpoint_error(fa, gt, mask))
+            sb.append(endpoint_error(fb, gt, mask))
+            d = endpoint_error_map(fa, fb)
             d = d[np.isfinite(d)]
             p99.append(float(np.percentile(d, 99)))
             pmax.append(float(d.max()))
@@ -184,10 +192,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     work = Path(args.keep or tempfile.mkdtemp(prefix="varflow-repro-"))
     work.mkdir(parents=True, exist_ok=True)
-    passthrough = [a for a in (argv if argv is not None else sys.argv[1:])]
-    if "--keep" in passthrough:
-        i = passthrough.index("--keep")
-        del passthrough[i:i + 2]
+    passthrough = _child_args(args)
     files = {}
     for label, cpu in (("host", None), ("generic", "generic")):
         env = dict(os.environ)
