@@ -1,33 +1,11 @@
 """The ``varflow`` command line.
 
-Synopsis::
-
-    varflow flow FRAME0 FRAME1 -o OUT.flo|OUT.png [--png COLOUR.png] [--method NAME]
-                 [--max-radius R] [--quiet] [--<parameter> VALUE ...]
-    varflow show FLOW -o OUT.png [--max-radius R] [--legend]
-    varflow eval EST GT [--occlusions MASK.png] [--json]
-    varflow demo [-o DIR] [--quiet]
-    varflow methods [--params] [--markdown]
-    varflow bench middlebury [--data DIR] [--methods tvl1,...] [--sequences ...]
-                             [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
-    varflow bench middlebury-multiframe [--data DIR] [--methods rlr,twoframe,...]
-                             [--sintel] [--csv OUT.csv] [--quiet] [--<parameter> VALUE ...]
-    varflow bench twoframe [--sets photo,middlebury,sintel] [--split tuning|reporting|both]
-                           [--families ...] [--methods tvl1,...]
-                           [--peers deepflow,dis,dualtvl1,skimage|all|none]
-                           [--photo-shape HxW] [--data DIR] [--csv OUT.csv] [--quiet]
-                           [--<parameter> VALUE ...]
-    varflow bench sintel-trajectories [--data DIR] [--methods twoframe,mfsf,rlr]
-                             [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
-                             [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
-                             [--quiet] [--<parameter> VALUE ...]
-    varflow video VIDEO -o OUT.mp4|.mkv|.avi [--method NAME] [--start N] [--stop N]
-                  [--stride S] [--layout flow|side-by-side|warped] [--max-radius R]
-    varflow batch flow INPUT... -o OUT [--method NAME] [--stride S | --pairs FILE]
-                  [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
-                  [--format flo|png] [--zarr] [--overwrite] [--<parameter> VALUE ...]
-    varflow batch track INPUT... -o OUT --window F --overlap K [--method NAME] ...
-    varflow report PATH -o REPORT.html [--gt GT.flo] [--title T] [--max-frames N]
+Commands, each with its synopsis in the notes of its module (and ``varflow
+COMMAND --help``): ``flow``, ``show``, ``eval``, ``demo`` and ``methods``
+(:mod:`~varflow.cli.flow`); ``track`` (:mod:`~varflow.cli.track`); ``bench middlebury
+| middlebury-multiframe | trajectories | twoframe | sintel-trajectories``
+(:mod:`~varflow.cli.bench`); ``video`` (:mod:`~varflow.cli.video`); ``batch flow |
+track`` (:mod:`~varflow.cli.batch`); ``report`` (:mod:`~varflow.cli.report`).
 
 Method parameters become flags automatically: every field of the parameter
 dataclass of every registered method is offered as ``--field-name`` (booleans as
