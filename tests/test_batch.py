@@ -447,7 +447,7 @@ def test_track_windows_and_zarr(tmp_path: Path, videos: Path, scheduler: str,
     tf = read_trajectories(out / "clip0" / "window_000001.npz")
     assert tf.ref == 2 and tf.metadata["frames"] == [1, 2, 3, 4]
     assert tf.metadata["ref_frame"] == 3 and tf.metadata["method"] == "chain"
-    assert tf.metadata["params"]["n_warps"] == 2
+    assert tf.metadata["params"]["flow_params"]["n_warps"] == 2  # chain composes its flow
     traj, vis = varflow.track(frames[1:5], None, "chain", scale_factor=0.5, n_warps=2,
                               max_iterations=20, return_visibility=True)
     np.testing.assert_array_equal(tf.trajectories, traj)

@@ -14,7 +14,7 @@ import re
 import pytest
 
 from varflow import cli
-from varflow.registry import METHODS, TRACKERS
+from varflow.registry import METHODS, TRACKERS, parameter_fields
 
 
 def help_text(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -110,23 +110,25 @@ def test_every_flow_flag_states_the_method_default(method: str) -> None:
 
 @pytest.mark.parametrize("method", list(TRACKERS))
 def test_every_track_flag_states_the_tracker_default(method: str) -> None:
-    defaults = TRACKERS[method].params()
-    own = {f.name for f in dataclasses.fields(defaults)}
+    # a tracker composing a two-frame method has that method's fields too
+    own = {name: d for name, d, _ in parameter_fields(TRACKERS[method])}
     for argv in (["track", "--method", method], ["batch", "track", "--method", method]):
         helps = param_helps(subparser(cli.build_parser(argv), *argv[:-2]))
         for name, text in helps.items():
             if name in own:
                 assert text is not None
-                assert text.endswith(f"(default {getattr(defaults, name)})"), (name, text)
+                assert text.endswith(f"(default {own[name]})"), (name, text)
             else:
                 assert text is None, name
 
 
 def test_track_and_batch_help_without_method(capsys: pytest.CaptureFixture[str]) -> None:
+    # twoframe and chain take the default two-frame method's (tvl1's) defaults
     text = help_text(capsys, "track")
-    assert "(default 3; mfsf, twoframe, chain: 0)" in flag_help(text, "--weighted-median-radius")
+    assert "(default 3; mfsf: 0)" in flag_help(text, "--weighted-median-radius")
+    assert "(default 5; twoframe, chain: 4)" in flag_help(text, "--n-warps")
     text = help_text(capsys, "batch", "track")
-    assert "(default 3; mfsf, twoframe, chain: 0)" in flag_help(text, "--weighted-median-radius")
+    assert "(default 3; mfsf: 0)" in flag_help(text, "--weighted-median-radius")
     text = help_text(capsys, "batch", "flow")
     assert "(default 4; tvl1-*: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
     text = help_text(capsys, "batch", "flow", "--method", "tvl1-ld")

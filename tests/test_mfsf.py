@@ -16,7 +16,7 @@ from varflow.multiframe.rlr import (
     ustep_iterations_numpy,
 )
 from varflow.multiframe.track import check_frames
-from varflow.twoframe.tvl1 import _row_blocks
+from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
 
 
 def test_dct_basis_is_orthonormal_and_separates_u_and_v():
@@ -99,10 +99,14 @@ def test_zero_weight_gives_the_decoupled_refinement_of_rlr(noisy_seq):
 
 
 @pytest.mark.parametrize("basis", ["pca", "dct"])
-def test_mfsf_improves_on_independent_flows_on_a_noisy_sequence(noisy_seq, basis):
-    # measured (2026-11-23): twoframe 0.152, mfsf pca 0.119, dct 0.118 (rlr 0.079) px EPE
+def test_mfsf_improves_on_independent_flows_of_its_energy_on_a_noisy_sequence(noisy_seq, basis):
+    # measured (2026-11-23): twoframe (plain energy) 0.152, mfsf pca 0.119, dct 0.118
+    # (rlr 0.079) px EPE.  The subspace constraint is compared with independent flows of
+    # the energy MFSF refines (the book's plain TV-L1); against the library's default
+    # flow (twoframe with tvl1: 0.123, 2026-12-01) it gains only 4 %, which is a
+    # benchmark figure, not a test bound.
     s = noisy_seq
-    two = varflow.track(s.frames, s.ref, "twoframe")
+    two = varflow.track(s.frames, s.ref, "twoframe", flow_params=PlainTVL1Params())
     mf = varflow.track(s.frames, s.ref, "mfsf", basis=basis)
     e_two, e_mf = (trajectory_errors(t, s.trajectories, s.visibility, ref=s.ref)["epe"]
                    for t in (two, mf))

@@ -6,7 +6,7 @@ import pytest
 from varflow.evaluation.trajectory_metrics import occlusion_accuracy, trajectory_errors
 from varflow.generators.sequences import make_sequence
 from varflow.multiframe.propagate import extrapolate, frame_pyramids, propagate_trajectories
-from varflow.multiframe.track import track_twoframe
+from varflow.multiframe.track import TwoFrameTrackParams, track_twoframe
 from varflow.multiframe.visibility import (
     VisibilityParams,
     estimate_visibility,
@@ -39,7 +39,7 @@ def test_propagation_follows_a_fast_object_that_independent_flows_lose(fast_disc
     """Measured (2026-11-29): far-frame EPE twoframe 4.3, propagated 0.2 px."""
     s = fast_disc
     p = TVL1Params()
-    two = track_twoframe(s.frames, s.ref, p)
+    two = track_twoframe(s.frames, s.ref, TwoFrameTrackParams(flow_params=p))
     st: dict = {}
     prop = propagate_trajectories(s.frames, s.ref, p, stats=st)
     far_two, all_two = _far_epe(two, s)

@@ -21,7 +21,8 @@ def affine_seq():
 
 @pytest.mark.parametrize("method, bound", [("twoframe", 0.07), ("chain", 0.09)])
 def test_baselines_track_an_affine_sequence(affine_seq, method, bound):
-    # measured (2026-11-23): twoframe 0.036, chain 0.046 px mean EPE (zero: 1.13); bound ~2x
+    # measured (2026-11-23, plain energy): twoframe 0.036, chain 0.046 px mean EPE (zero:
+    # 1.13); 2026-12-01 with the default tvl1 (issue 27): 0.041, 0.038; bound ~2x
     s = affine_seq
     traj = varflow.track(s.frames, s.ref, method)
     assert traj.shape == s.trajectories.shape and traj.dtype == np.float32
@@ -30,6 +31,51 @@ def test_baselines_track_an_affine_sequence(affine_seq, method, bound):
     assert err["epe"] < bound, err["epe"]
     assert trajectory_errors(np.zeros_like(traj), s.trajectories, s.visibility,
                              ref=s.ref)["epe"] > 5 * bound
+
+
+@pytest.mark.parametrize("kw", [{}, {"flow_method": "tvl1-ld", "n_warps": 2},
+                                {"flow_method": "tensor", "n_warps": 2}])
+def test_twoframe_is_a_loop_of_varflow_flow(kw):
+    """Issue 27: the baseline is the flow a user gets from ``varflow.flow`` (bit for bit),
+    with its default method unless another is named; chain composes the same flows."""
+    rng = np.random.default_rng(3)
+    s = make_sequence("affine", n_frames=4, shape=(48, 64), magnitude=3.0, seed=2)
+    frames = (np.clip(s.frames, 0, 1) * 255).astype(np.uint8)
+    frames[1] = np.clip(frames[1] + rng.integers(-3, 4, frames[1].shape), 0, 255)
+    ref = 1
+    method = kw.get("flow_method", "tvl1")
+    fields = {k: v for k, v in kw.items() if k != "flow_method"}
+    traj = varflow.track(frames, ref, "twoframe", **kw)
+    assert np.all(traj[ref] == 0)
+    for n in (0, 2, 3):
+        np.testing.assert_array_equal(traj[n], varflow.flow(frames[ref], frames[n], method,
+                                                             **fields))
+    chain = varflow.track(frames, ref, "chain", **kw)
+    np.testing.assert_array_equal(chain[2], varflow.flow(frames[1], frames[2], method, **fields))
+    np.testing.assert_array_equal(
+        chain[3], compose(chain[2], varflow.flow(frames[2], frames[3], method, **fields)))
+
+
+def test_composed_tracker_parameters():
+    from varflow.registry import make_track_params
+    from varflow.twoframe.large_displacement import LargeDisplacementParams
+    from varflow.twoframe.tvl1 import TVL1Params
+
+    p = make_track_params("twoframe")
+    assert p.flow_method == "tvl1" and p.flow_params == TVL1Params()
+    q = make_track_params("twoframe", flow_method="tvl1-ld", n_warps=2)
+    assert isinstance(q.flow_params, LargeDisplacementParams) and q.flow_params.n_warps == 2
+    # a new method starts from its own defaults; the tracker's other fields are kept
+    r = make_track_params("twoframe", q, flow_method="tvl1")
+    assert type(r.flow_params) is TVL1Params and r.flow_params.n_warps == 4
+    with pytest.raises(ValueError, match="^flow_method:"):
+        make_track_params("chain", flow_method="nope")
+    with pytest.raises(ValueError, match="^flow_params:"):
+        make_track_params("chain", flow_method="tvl1-ld", flow_params=TVL1Params())
+    with pytest.raises(ValueError, match="^link_weight: not a parameter"):
+        make_track_params("twoframe", link_weight=1.0)
+    with pytest.raises(ValueError, match="^data_weight:"):
+        make_track_params("twoframe", data_weight=-1.0)
 
 
 def test_compose_adds_translations_exactly():
@@ -97,7 +143,9 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
     assert ref == 2 and traj.shape == (5, 72, 96, 2) and meta["method"] == method
     assert vis_est.shape == (5, 72, 96) and vis_est.dtype == bool and vis_est[2].all()
     assert 0.5 < vis_est.mean() <= 1.0
-    assert meta["params"]["n_warps"] == 3
+    params = meta["params"]
+    params = params.get("flow_params", params)  # chain composes its two-frame method's
+    assert params["n_warps"] == 3
     assert len(list((tmp_path / "warped").glob("*.png"))) == 5
     assert len(list((tmp_path / "png").glob("*.png"))) == 5
     assert (tmp_path / "plot.png").stat().st_size > 0
@@ -180,3 +228,24 @@ def test_track_returns_visibility(affine_seq, method):
     assert acc > 0.95, acc
     plain = varflow.track(frames, r, method)
     np.testing.assert_array_equal(plain, traj)
+
+
+def test_benchmark_method_specs():
+    from varflow.evaluation.bench.common import method_spec, split_overrides
+    from varflow.registry import TRACKERS
+
+    assert method_spec("rlr:link_weight=0", TRACKERS) == ("rlr", {"link_weight": 0.0})
+    assert method_spec("twoframe:tvl1-ld", TRACKERS) == ("twoframe", {"flow_method": "tvl1-ld"})
+    assert method_spec("rlr:visibility=false:n_warps=2", TRACKERS) == (
+        "rlr", {"visibility": False, "n_warps": 2})
+    for bad, field in (("rlr:bogus=1", "bogus"), ("rlr:n_warps=x", "n_warps"),
+                       ("twoframe:nope", "flow_method"), ("nope", "method")):
+        with pytest.raises(ValueError, match=f"^{field}:"):
+            method_spec(bad, TRACKERS)
+    # a spec's own fields win; a per-name entry reaches every spec of that name
+    out = split_overrides(["rlr", "rlr:link_weight=0", "twoframe:tvl1-ld"],
+                          {"link_weight": 1.0, "rlr": {"n_warps": 2}, "n_warps": 3},
+                          registry=TRACKERS)
+    assert out["rlr"] == {"link_weight": 1.0, "n_warps": 3}
+    assert out["rlr:link_weight=0"] == {"link_weight": 0.0, "n_warps": 3}
+    assert out["twoframe:tvl1-ld"] == {"n_warps": 3, "flow_method": "tvl1-ld"}

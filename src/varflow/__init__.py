@@ -37,7 +37,8 @@ import numpy as np
 
 from ._version import __version__
 from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
-from .twoframe.coarse_to_fine import ProgressCallback, coarse_to_fine
+from .twoframe.coarse_to_fine import ProgressCallback
+from .twoframe.methods import run_method
 
 __all__ = [
     "__version__",
@@ -150,8 +151,13 @@ def track(
     if visible is None:
         from .multiframe.propagate import frame_pyramids
         from .multiframe.visibility import estimate_visibility
+        from .twoframe.tvl1 import TVL1Params
 
-        visible = estimate_visibility(traj, r, frame_pyramids(arr, p), p)
+        # the backward flows are TV-L1 with the tracker's two-frame parameters when
+        # those are TV-L1's (every registered method's derive from them)
+        fp = getattr(p, "flow_params", p)
+        fp = fp if isinstance(fp, TVL1Params) else TVL1Params()
+        visible = estimate_visibility(traj, r, frame_pyramids(arr, fp), fp)
     return traj, visible
 
 
@@ -214,11 +220,7 @@ def flow(
     shape = np.shape(frame0)
     if len(shape) in (2, 3):  # anything else is reported by the input checks
         check_memory(m.name, shape, 2, p)
-    if m.run is not None:  # a pipeline with stages around the driver (tvl1-ld)
-        return m.run(frame0, frame1, p, init_flow=init_flow, callback=callback, stats=stats)
-    return coarse_to_fine(
-        frame0, frame1, m.solve_warp, p, init_flow=init_flow, callback=callback, stats=stats
-    )
+    return run_method(m, frame0, frame1, p, init_flow=init_flow, callback=callback, stats=stats)
 
 
 def __getattr__(name: str) -> Any:

@@ -1,30 +1,31 @@
 """The method registries: plain dicts that the API, the CLI and the benchmarks read.
 
-:data:`METHODS` maps a two-frame method name to a :class:`Method`: its frozen
-parameter dataclass, its single-level warp solver (plugged into
-:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`), a one-line description and,
-for a method with stages around the driver (``tvl1-ld``), the function that runs it.
+:data:`METHODS` (defined in :mod:`varflow.twoframe.methods`, re-exported here) maps a
+two-frame method name to a :class:`Method`: its frozen parameter dataclass, its
+single-level warp solver, a one-line description and, for a method with stages
+around the driver (``tvl1-ld``), the function that runs it.
 :data:`TRACKERS` maps a multi-frame (trajectory) method name to a :class:`Tracker`:
 its parameter dataclass and its ``track(frames, ref, params, callback)`` function.
+
+A tracker built on a two-frame method (``twoframe``, ``chain``) composes that
+method's parameter object (its field ``flow_params``); :func:`make_track_params`
+routes an override that is not one of the tracker's own fields to it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from .multiframe import mfsf as _mfsf
 from .multiframe import rlr as _rlr
 from .multiframe import track as _track
-from .twoframe import large_displacement as _ld
-from .twoframe import sparse as _sparse
-from .twoframe import tensor as _tensor
-from .twoframe import tvl1 as _tvl1
-from .twoframe.coarse_to_fine import CoarseToFineParams, WarpSolver
+from .twoframe.coarse_to_fine import CoarseToFineParams
+from .twoframe.methods import DEFAULT_METHOD, METHODS, Method, get_method
 
 __all__ = [
+    "DEFAULT_METHOD",
     "Method",
     "METHODS",
     "Tracker",
@@ -33,87 +34,8 @@ __all__ = [
     "get_tracker",
     "make_params",
     "make_track_params",
+    "parameter_fields",
 ]
-
-
-@dataclass(frozen=True)
-class Method:
-    """A registered two-frame method.
-
-    Attributes
-    ----------
-    name : str
-    params : type
-        Frozen dataclass of its parameters (a :class:`CoarseToFineParams` subclass).
-    solve_warp : callable
-        Single-level, single-warp solver.
-    description : str
-    run : callable, optional
-        ``run(frame0, frame1, params, init_flow=None, callback=None, stats=None)``
-        for a method whose pipeline has stages around the coarse-to-fine driver
-        (which it calls with ``solve_warp``); None: the driver alone.
-    """
-
-    name: str
-    params: type[CoarseToFineParams]
-    solve_warp: WarpSolver
-    description: str
-    run: Callable[..., Any] | None = None
-
-
-METHODS: dict[str, Method] = {
-    "tvl1": Method(
-        name="tvl1",
-        params=_tvl1.TVL1Params,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
-        "ROF texture, median)",
-    ),
-    "tvl1-fast": Method(
-        name="tvl1-fast",
-        params=_tvl1.TVL1FastParams,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
-    ),
-    "tvl1-ld": Method(
-        name="tvl1-ld",
-        params=_ld.LargeDisplacementParams,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 for large displacements (PatchMatch matches, edge-aware "
-        "interpolation, fused per level)",
-        run=_ld.tvl1_ld,
-    ),
-    "tensor": Method(
-        name="tensor",
-        params=_tensor.TensorParams,
-        solve_warp=_tensor.solve_warp,
-        description="tensor-directed TV-L1 (anisotropic TV following image structure)",
-    ),
-    "sparse-dct": Method(
-        name="sparse-dct",
-        params=_sparse.SparseDCTParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, fixed overcomplete DCT dictionary",
-    ),
-    "sparse-1d": Method(
-        name="sparse-1d",
-        params=_sparse.Sparse1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionary shared by u and v",
-    ),
-    "sparse-2x1d": Method(
-        name="sparse-2x1d",
-        params=_sparse.Sparse2x1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionaries for u and for v",
-    ),
-    "sparse-2d": Method(
-        name="sparse-2d",
-        params=_sparse.Sparse2DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
-    ),
-}
 
 
 @dataclass(frozen=True)
@@ -157,13 +79,15 @@ TRACKERS: dict[str, Tracker] = {
         name="twoframe",
         params=_track.TwoFrameTrackParams,
         track=_track.track_twoframe,
-        description="independent TV-L1 flows from the reference to every frame",
+        description="independent two-frame flows (varflow.flow) from the reference to every "
+        "frame",
     ),
     "chain": Tracker(
         name="chain",
         params=_track.ChainTrackParams,
         track=_track.track_chain,
-        description="TV-L1 flows between consecutive frames, composed along the trajectory",
+        description="two-frame flows (varflow.flow) between consecutive frames, composed "
+        "along the trajectory",
     ),
 }
 
@@ -175,16 +99,6 @@ def get_tracker(name: str) -> Tracker:
     except KeyError:
         raise ValueError(
             f"method: unknown trajectory method {name!r}; available: {', '.join(TRACKERS)}"
-        ) from None
-
-
-def get_method(name: str) -> Method:
-    """Look a method up by name; unknown names raise ``ValueError`` listing the choices."""
-    try:
-        return METHODS[name]
-    except KeyError:
-        raise ValueError(
-            f"method: unknown method {name!r}; available: {', '.join(sorted(METHODS))}"
         ) from None
 
 
@@ -201,9 +115,69 @@ def make_params(method: str | Method, params: Any = None, **overrides: Any) -> C
 
 
 def make_track_params(method: str | Tracker, params: Any = None, **overrides: Any) -> Any:
-    """:func:`make_params` for a trajectory method of :data:`TRACKERS`."""
+    """:func:`make_params` for a trajectory method of :data:`TRACKERS`.
+
+    For a tracker that composes a two-frame method (a ``flow_params`` field), an
+    override that is not one of the tracker's own fields goes to ``flow_params``
+    (checked against the fields of ``flow_method``'s parameters, after a change of
+    ``flow_method``, which starts from that method's defaults unless
+    ``flow_params`` is given too).
+    """
     m = get_tracker(method) if isinstance(method, str) else method
-    return _make(m, params, **overrides)
+    if "flow_params" not in {f.name for f in dataclasses.fields(m.params)}:
+        return _make(m, params, **overrides)
+    own = {k: v for k, v in overrides.items() if k in track_fields(m.params)}
+    rest = {k: v for k, v in overrides.items() if k not in own}
+    base = params if params is not None else m.params(**{k: v for k, v in own.items()})
+    if params is not None and own:
+        if "flow_method" in own and "flow_params" not in own and \
+                own["flow_method"] != params.flow_method:
+            own["flow_params"] = None  # the new method's defaults
+        base = _make(m, params, **own)
+    if not isinstance(base, m.params):
+        raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
+    if not rest:
+        return base
+    flow_method = get_method(base.flow_method)
+    names = {f.name for f in dataclasses.fields(flow_method.params)}
+    unknown = sorted(set(rest) - names)
+    if unknown:
+        valid = sorted(names | set(track_fields(m.params)))
+        raise ValueError(
+            f"{unknown[0]}: not a parameter of method {m.name!r} with flow_method "
+            f"{base.flow_method!r} (valid: {', '.join(valid)})"
+        )
+    return dataclasses.replace(base, flow_params=dataclasses.replace(base.flow_params, **rest))
+
+
+def track_fields(params_class: type) -> tuple[str, ...]:
+    """The names of a tracker parameter class's own fields."""
+    return tuple(f.name for f in dataclasses.fields(params_class))
+
+
+def parameter_fields(entry: Method | Tracker, flow_method: str | None = None
+                     ) -> list[tuple[str, Any, type]]:
+    """``(name, default, class documenting it)`` of every parameter an entry accepts.
+
+    A method's fields; a tracker's own fields and, for a tracker composing a
+    two-frame method, then the fields of ``flow_method``'s parameters (default: the
+    tracker's default method), which :func:`make_track_params` routes to
+    ``flow_params``.  The CLI builds its flags and help from it.
+    """
+    defaults = entry.params()
+    out = [(f.name, getattr(defaults, f.name), entry.params)
+           for f in dataclasses.fields(entry.params) if f.name != "flow_params"]
+    inner = getattr(defaults, "flow_params", None)
+    if inner is not None and dataclasses.is_dataclass(inner):
+        if flow_method is not None and flow_method != defaults.flow_method:
+            if flow_method not in METHODS:
+                raise ValueError(f"flow_method: unknown two-frame method {flow_method!r}; "
+                                 f"available: {', '.join(sorted(METHODS))}")
+            inner = METHODS[flow_method].params()
+        own = {name for name, _, _ in out}
+        out += [(f.name, getattr(inner, f.name), type(inner))
+                for f in dataclasses.fields(inner) if f.name not in own]
+    return out
 
 
 def _make(m: Method | Tracker, params: Any, **overrides: Any) -> Any:

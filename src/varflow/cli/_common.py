@@ -19,7 +19,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from ..registry import METHODS, TRACKERS, get_method
+from ..registry import METHODS, TRACKERS, get_method, parameter_fields
 
 __all__ = ["PROG", "parameter_table"]
 
@@ -131,25 +131,27 @@ class _Param:
 def _collect_params(registry: Mapping[str, Any] = METHODS) -> dict[str, _Param]:
     """All scalar fields of all registered methods' parameter classes, in registry order.
 
-    Every field records the methods that have it (``owners``) and each one's default
+    A tracker that composes a two-frame method (``twoframe``, ``chain``) offers that
+    method's fields too (:func:`varflow.registry.parameter_fields`).  Every field
+    records the methods that have it (``owners``) and each one's default
     (``defaults``).
     """
     params: dict[str, _Param] = {}
     for mname, method in registry.items():
-        docs = _field_docs(method.params)
-        defaults = method.params()
-        for f in dataclasses.fields(method.params):
-            default = getattr(defaults, f.name)
-            if f.name in params:
-                params[f.name].owners.append(mname)
-                params[f.name].defaults[mname] = default
+        docs: dict[type, dict[str, _FieldDoc]] = {}
+        for name, default, owner in parameter_fields(method):
+            if name in params:
+                params[name].owners.append(mname)
+                params[name].defaults[mname] = default
                 continue
             kind = type(default)
             if kind not in (bool, int, float, str):
-                log.debug("no CLI flag for %s.%s (type %s)", mname, f.name, kind.__name__)
+                log.debug("no CLI flag for %s.%s (type %s)", mname, name, kind.__name__)
                 continue
-            params[f.name] = _Param(f.name, kind, default, [mname], docs.get(f.name),
-                                    {mname: default})
+            if owner not in docs:
+                docs[owner] = _field_docs(owner)
+            params[name] = _Param(name, kind, default, [mname], docs[owner].get(name),
+                                  {mname: default})
     return params
 
 
@@ -273,9 +275,11 @@ def _params_note(overrides: Mapping[str, Any]) -> str:
 
 
 def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, Any]:
-    """The parameter flags given on the command line; each must be a field of ``entry``."""
+    """The parameter flags given on the command line; each must be a field of ``entry``
+    (for a tracker composing a two-frame method, or of its ``--flow-method``'s
+    parameters)."""
     given = _given_params(args)
-    own = {f.name for f in dataclasses.fields(entry.params)}
+    own = {name for name, _, _ in parameter_fields(entry, given.get("flow_method"))}
     for name in given:
         if name not in own:
             flag = "--" + name.replace("_", "-")
@@ -298,12 +302,13 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     str
     """
     m = TRACKERS[method] if method in TRACKERS else get_method(method)
-    docs = _field_docs(m.params)
-    defaults = m.params()
+    docs: dict[type, dict[str, _FieldDoc]] = {}
     rows = []
-    for f in dataclasses.fields(m.params):
-        d = docs.get(f.name)
-        rows.append((f.name, d.symbol if d and d.symbol else "", repr(getattr(defaults, f.name)),
+    for name, default, owner in parameter_fields(m):
+        if owner not in docs:
+            docs[owner] = _field_docs(owner)
+        d = docs[owner].get(name)
+        rows.append((name, d.symbol if d and d.symbol else "", repr(default),
                      d.meaning if d else ""))
     if markdown:
         lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]

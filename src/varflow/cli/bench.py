@@ -45,6 +45,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
     ``common`` and ``argv`` are).
     """
+    from ..evaluation.bench.multiframe import default_methods
+
     params = _collect_params()
     tparams = _collect_params(TRACKERS)
     p = sub.add_parser("bench", help="accuracy benchmarks", description="Accuracy benchmarks.")
@@ -88,8 +90,9 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     b.add_argument("--suite", choices=("procedural", "photo", "both"), default=None,
                    help="which suite to run (default: both, unless only one suite's options "
                    "are given)")
-    b.add_argument("--methods", default=",".join(TRACKERS), metavar="NAMES",
-                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default all)")
+    b.add_argument("--methods", default=",".join(default_methods()), metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(TRACKERS)}, each optionally "
+                   "NAME:FIELD=VALUE (default %(default)s)")
     g = b.add_argument_group("procedural suite")
     g.add_argument("--frames", type=int, default=None, metavar="F", help="frames (default 30)")
     g.add_argument("--shape", default=None, metavar="HxW", help="frame size (default 96x128)")
@@ -162,7 +165,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     b.add_argument("--data", metavar="DIR",
                    help="data folder (default $VARFLOW_DATA or ../shared/data)")
     b.add_argument("--methods", default=mf_default, metavar="NAMES",
-                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default {mf_default})")
+                   help=f"comma-separated, from: {', '.join(TRACKERS)}, each optionally "
+                   f"NAME:FIELD=VALUE (default {mf_default})")
     b.add_argument("--sintel", action="store_true",
                    help="also report on the MPI-Sintel snippets found under the data folder")
     _add_param_flags(b, tparams, TRACKERS, chosen_methods(argv, TRACKERS))
@@ -170,7 +174,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 
     from ..evaluation.bench.multiframe import PROTOCOL_METHODS, PROTOCOL_REFS, PROTOCOL_WINDOWS
 
-    st_default = ",".join(m for m in PROTOCOL_METHODS if m in TRACKERS)
+    st_default = ",".join(m for m in PROTOCOL_METHODS if m.split(":")[0] in TRACKERS)
     b = bsub.add_parser("sintel-trajectories", parents=[common, bench_common],
                         help="book Table 4.1 protocol on MPI-Sintel alley_1 (50 frames), "
                         "plus RubberWhale frame 11",
@@ -185,7 +189,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     b.add_argument("--data", metavar="DIR",
                    help="data folder (default $VARFLOW_DATA or ../shared/data)")
     b.add_argument("--methods", default=st_default, metavar="NAMES",
-                   help=f"comma-separated, from: {', '.join(TRACKERS)} (default {st_default})")
+                   help=f"comma-separated, from: {', '.join(TRACKERS)}, each optionally "
+                   f"NAME:FIELD=VALUE (default {st_default})")
     b.add_argument("--refs", nargs="+", type=int, default=list(PROTOCOL_REFS), metavar="R",
                    help="reference frame numbers, 1-based; each needs frame R+1 and "
                    "flow/alley_1/frame_R.flo (default "
@@ -205,12 +210,24 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 
 
 def _checked_methods(value: str, lookup, what: str) -> list[str]:
-    """The ``--methods`` list, each name checked by ``lookup`` (one-line errors)."""
+    """The ``--methods`` list, each name checked by ``lookup`` (one-line errors).
+
+    Trajectory methods may be specs, ``NAME:FIELD=VALUE`` (e.g. ``rlr:link_weight=0``,
+    ``twoframe:tvl1-ld``; :func:`varflow.evaluation.bench.common.method_spec`).
+    """
+    from varflow.evaluation.bench.common import method_spec
+
     methods = _split_list(value)
     if not methods:
         raise ValueError(f"--methods: give at least one {what} name")
     for m in methods:
-        lookup(m)
+        if lookup is get_tracker:
+            method_spec(m, TRACKERS)
+        elif ":" in m:
+            raise ValueError(f"--methods: {m!r}: NAME:FIELD=VALUE specs are for trajectory "
+                             "methods; give the fields as --<parameter> flags")
+        else:
+            lookup(m)
     return methods
 
 

@@ -13,7 +13,11 @@ in frame ``ref`` is at ``x + traj[n, x]`` in frame ``n`` (``traj[ref] = 0``).
   sampled (bicubic) at the current position.  Errors accumulate (drift), but every
   flow is small.
 
-Both use a registered two-frame method (``tvl1`` by default) with its parameters.
+Both run a registered two-frame method (``flow_method``; by default that of
+:func:`varflow.flow`, :data:`~varflow.twoframe.methods.DEFAULT_METHOD`) with its
+parameter object (``flow_params``) exactly as :func:`varflow.flow` does, so that
+``twoframe`` is a loop of :func:`varflow.flow` and the baseline of every trajectory
+table is the flow a user already has.
 """
 
 from __future__ import annotations
@@ -28,11 +32,12 @@ import numpy as np
 
 from .._validate import as_float_frames
 from ..ops.warp import warp_bicubic
-from ..twoframe.coarse_to_fine import _check
-from ..twoframe.tvl1 import PlainTVL1Params, TVL1Params, tvl1
+from ..twoframe.coarse_to_fine import CoarseToFineParams, _check
+from ..twoframe.methods import DEFAULT_METHOD, METHODS, run_method
 
 __all__ = [
     "TrackCallback",
+    "FlowTrackParams",
     "TwoFrameTrackParams",
     "ChainTrackParams",
     "check_frames",
@@ -49,19 +54,56 @@ TrackCallback = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
-class TwoFrameTrackParams(PlainTVL1Params):
-    """Parameters of the ``twoframe`` tracker: TV-L1 from the reference to every frame.
+class FlowTrackParams:
+    """A registered two-frame method and its parameters: the trackers built on flows.
 
-    All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.
+    Composed, not inherited: the two-frame method's parameter object is a field, so
+    any method of :data:`~varflow.twoframe.methods.METHODS` serves, each with all
+    its own fields.  :func:`varflow.registry.make_track_params` (and so
+    :func:`varflow.track` and the CLI) routes an override that is not a field
+    here to ``flow_params``.
+
+    Attributes
+    ----------
+    flow_method : str
+        The two-frame method, a name of :data:`~varflow.twoframe.methods.METHODS`.
+        Default ``"tvl1"``, the default of :func:`varflow.flow`.
+    flow_params : CoarseToFineParams or None
+        Its parameter object, an instance of the method's parameter class; None
+        (default) gives the method's defaults.
     """
+
+    flow_method: str = DEFAULT_METHOD
+    flow_params: CoarseToFineParams | None = None
+
+    def __post_init__(self) -> None:
+        method = METHODS.get(self.flow_method) if isinstance(self.flow_method, str) else None
+        _check(method is not None, "flow_method",
+               f"unknown two-frame method {self.flow_method!r}; available: "
+               f"{', '.join(sorted(METHODS))}")
+        if self.flow_params is None:
+            object.__setattr__(self, "flow_params", method.params())
+        _check(isinstance(self.flow_params, method.params), "flow_params",
+               f"expected {method.params.__name__} for method {self.flow_method!r}, got "
+               f"{type(self.flow_params).__name__}")
 
 
 @dataclass(frozen=True)
-class ChainTrackParams(PlainTVL1Params):
-    """Parameters of the ``chain`` tracker: TV-L1 between consecutive frames, composed.
+class TwoFrameTrackParams(FlowTrackParams):
+    """Parameters of the ``twoframe`` tracker: the two-frame flow from the reference to
+    every frame.  The fields are those of :class:`FlowTrackParams`."""
 
-    All fields are those of :class:`~varflow.twoframe.tvl1.TVL1Params`.
-    """
+
+@dataclass(frozen=True)
+class ChainTrackParams(FlowTrackParams):
+    """Parameters of the ``chain`` tracker: two-frame flows between consecutive frames,
+    composed.  The fields are those of :class:`FlowTrackParams`."""
+
+
+def _flow(params: FlowTrackParams, frame0: np.ndarray, frame1: np.ndarray) -> np.ndarray:
+    """The flow of ``params.flow_method`` from ``frame0`` to ``frame1``, as
+    :func:`varflow.flow` computes it."""
+    return run_method(METHODS[params.flow_method], frame0, frame1, params.flow_params)
 
 
 def check_frames(frames: Any) -> np.ndarray:
@@ -120,17 +162,20 @@ def _progress(callback: TrackCallback | None, done: int, total: int) -> None:
 
 
 def track_twoframe(
-    frames: np.ndarray, ref: int, params: TVL1Params, callback: TrackCallback | None = None,
-    stats: dict | None = None,
+    frames: np.ndarray, ref: int, params: FlowTrackParams,
+    callback: TrackCallback | None = None, stats: dict | None = None,
 ) -> np.ndarray:
-    """Trajectories as independent TV-L1 flows from the reference to every frame.
+    """Trajectories as independent two-frame flows from the reference to every frame.
+
+    ``traj[n]`` is exactly ``varflow.flow(frames[ref], frames[n], params.flow_method,
+    params=params.flow_params)``.
 
     Parameters
     ----------
     frames : ndarray, shape (F, H, W, C), float32
         From :func:`check_frames`.
     ref : int
-    params : TVL1Params
+    params : FlowTrackParams
     callback : callable, optional
         ``callback(done, total)`` after each flow.
     stats : dict, optional
@@ -145,7 +190,7 @@ def track_twoframe(
     traj = np.zeros((f, h, w, 2), np.float32)
     todo = [n for n in range(f) if n != ref]
     for i, n in enumerate(todo):
-        traj[n] = tvl1(frames[ref], frames[n], params)
+        traj[n] = _flow(params, frames[ref], frames[n])
         _progress(callback, i + 1, len(todo))
     if stats is not None:
         stats["seconds"] = time.perf_counter() - t0
@@ -173,10 +218,10 @@ def compose(traj_prev: np.ndarray, flow: np.ndarray) -> np.ndarray:
 
 
 def track_chain(
-    frames: np.ndarray, ref: int, params: TVL1Params, callback: TrackCallback | None = None,
-    stats: dict | None = None,
+    frames: np.ndarray, ref: int, params: FlowTrackParams,
+    callback: TrackCallback | None = None, stats: dict | None = None,
 ) -> np.ndarray:
-    """Trajectories by composing consecutive TV-L1 flows outwards from the reference.
+    """Trajectories by composing consecutive two-frame flows outwards from the reference.
 
     Arguments and result as in :func:`track_twoframe`.
     """
@@ -186,11 +231,11 @@ def track_chain(
     total = f - 1
     done = 0
     for n in range(ref + 1, f):
-        traj[n] = compose(traj[n - 1], tvl1(frames[n - 1], frames[n], params))
+        traj[n] = compose(traj[n - 1], _flow(params, frames[n - 1], frames[n]))
         done += 1
         _progress(callback, done, total)
     for n in range(ref - 1, -1, -1):
-        traj[n] = compose(traj[n + 1], tvl1(frames[n + 1], frames[n], params))
+        traj[n] = compose(traj[n + 1], _flow(params, frames[n + 1], frames[n]))
         done += 1
         _progress(callback, done, total)
     if stats is not None:

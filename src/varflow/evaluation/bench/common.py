@@ -17,10 +17,68 @@ import numpy as np
 
 from ...registry import METHODS
 
-__all__ = ["CSV_FIELDS", "markdown_table", "split_overrides", "write_csv"]
+__all__ = ["CSV_FIELDS", "markdown_table", "method_spec", "spec_name", "split_overrides",
+           "write_csv"]
 
 #: Default leading columns of :func:`write_csv` (those of the Middlebury runner's rows).
 CSV_FIELDS = ("sequence", "method", "aee", "aae", "seconds", "book_tv_aee", "book_aee")
+
+
+def _parse_value(text: str, default: Any, field: str) -> Any:
+    """A field value written in a method spec, of the type of the field's default."""
+    if isinstance(default, bool):
+        low = text.strip().lower()
+        if low in ("1", "true", "yes", "on"):
+            return True
+        if low in ("0", "false", "no", "off"):
+            return False
+        raise ValueError(f"{field}: expected true or false, got {text!r}")
+    for kind in (int, float):
+        if isinstance(default, kind):
+            try:
+                return kind(text)
+            except ValueError:
+                raise ValueError(f"{field}: expected {kind.__name__}, got {text!r}") from None
+    return text
+
+
+def method_spec(spec: str, registry: Mapping[str, Any] = METHODS) -> tuple[str, dict[str, Any]]:
+    """Split a method spec ``NAME[:FIELD=VALUE[:...]]`` into the name and its overrides.
+
+    A benchmark runs a method with other parameters beside its defaults this way:
+    ``rlr:link_weight=0`` is rlr decoupled.  For a tracker that composes a two-frame
+    method, a bare method name stands for ``flow_method=NAME``: ``twoframe:tvl1-ld``.
+    Values take the type of the field's default.  The spec is the row's label.
+
+    Raises
+    ------
+    ValueError
+        An unknown method or field, or a value of the wrong type.
+    """
+    from ...registry import parameter_fields
+
+    name, *parts = spec.split(":")
+    if name not in registry:
+        raise ValueError(f"method: unknown method {name!r}; available: {', '.join(registry)}")
+    entry = registry[name]
+    given: dict[str, str] = {}
+    for part in parts:
+        key, eq, value = part.partition("=")
+        if not eq:
+            key, value = "flow_method", key
+        given[key.strip()] = value.strip()
+    defaults = {n: d for n, d, _ in parameter_fields(entry, given.get("flow_method"))}
+    out: dict[str, Any] = {}
+    for key, value in given.items():
+        if key not in defaults:
+            raise ValueError(f"{key}: not a parameter of method {name!r} (in {spec!r})")
+        out[key] = _parse_value(value, defaults[key], key)
+    return name, out
+
+
+def spec_name(spec: str) -> str:
+    """The registered name of a method spec (:func:`method_spec`): the part before ``:``."""
+    return spec.split(":", 1)[0]
 
 
 def split_overrides(
@@ -33,10 +91,13 @@ def split_overrides(
     Parameters
     ----------
     methods : sequence of str
-        Registered method names.
+        Method specs (:func:`method_spec`): registered names, optionally with
+        ``:field=value`` parts, which override everything else for that entry.
     overrides : mapping, optional
         Either ``{field: value}``, applied to every listed method that has the field,
-        or ``{method: {field: value}}`` per method (the two forms can be mixed).
+        or ``{method: {field: value}}`` per method (the two forms can be mixed; the
+        key is a spec of ``methods`` or a registered name, which then applies to
+        every spec of that method).
     registry : mapping
         Where the methods are registered: :data:`~varflow.registry.METHODS` (default)
         or :data:`~varflow.registry.TRACKERS`.
@@ -44,7 +105,7 @@ def split_overrides(
     Returns
     -------
     dict
-        ``{method: {field: value}}`` for every method in ``methods``.
+        ``{spec: {field: value}}`` for every spec in ``methods``.
 
     Raises
     ------
@@ -52,24 +113,27 @@ def split_overrides(
         For a field that none of the listed methods has, or a per-method entry for a
         method not listed.
     """
-    import dataclasses
+    from ...registry import parameter_fields
 
-    for m in methods:
-        if m not in registry:
-            raise ValueError(f"method: unknown method {m!r}; available: {', '.join(registry)}")
+    specs = {m: method_spec(m, registry) for m in methods}
     out: dict[str, dict[str, Any]] = {m: {} for m in methods}
-    fields = {m: {f.name for f in dataclasses.fields(registry[m].params)} for m in methods}
+    fields = {m: {n for n, _, _ in parameter_fields(registry[name], own.get("flow_method"))}
+              for m, (name, own) in specs.items()}
     for key, value in (overrides or {}).items():
-        if key in registry and isinstance(value, Mapping):
-            if key not in out:
+        if (key in registry or key in specs) and isinstance(value, Mapping):
+            targets = [m for m in methods if m == key or specs[m][0] == key]
+            if not targets:
                 raise ValueError(f"overrides: method {key!r} is not among {', '.join(methods)}")
-            out[key].update(value)
+            for m in targets:
+                out[m].update(value)
             continue
         owners = [m for m in methods if key in fields[m]]
         if not owners:
             raise ValueError(f"{key}: not a parameter of method(s) {', '.join(methods)}")
         for m in owners:
             out[m][key] = value
+    for m, (_, own) in specs.items():
+        out[m].update(own)
     return out
 
 

@@ -64,7 +64,7 @@ from ..datasets import (
     data_root,
     load_middlebury_pair,
 )
-from .common import markdown_table
+from .common import markdown_table, spec_name
 from .trajectories import tracker_params
 
 __all__ = [
@@ -99,9 +99,12 @@ log = logging.getLogger(__name__)
 #: Method label of the two-frame baseline rows.
 BASELINE_LABEL = "tvl1 (two-frame)"
 
-#: Preferred trajectory methods, in table order; :func:`default_methods` keeps the
-#: registered ones.
-DEFAULT_METHODS: tuple[str, ...] = ("rlr", "mfsf", "twoframe", "chain")
+#: Preferred trajectory method specs, in table order (:func:`~varflow.evaluation.bench.
+#: common.method_spec`): rlr, rlr decoupled (τ = 0), mfsf, the library's two-frame flow
+#: from the reference (default method and ``tvl1-ld``) and chained;
+#: :func:`default_methods` keeps the registered ones.
+DEFAULT_METHODS: tuple[str, ...] = ("rlr", "rlr:link_weight=0", "mfsf", "twoframe",
+                                    "twoframe:tvl1-ld", "chain")
 
 #: Frame numbers of the RubberWhale clip and the index of the reference (frame10).
 RUBBERWHALE_FRAMES: tuple[int, ...] = tuple(range(7, 15))
@@ -112,7 +115,7 @@ Crop = tuple[int, int, int, int]
 
 def default_methods() -> list[str]:
     """The registered ones of :data:`DEFAULT_METHODS`, in that order."""
-    return [m for m in DEFAULT_METHODS if m in TRACKERS]
+    return [m for m in DEFAULT_METHODS if spec_name(m) in TRACKERS]
 
 
 def load_rubberwhale_clip(
@@ -324,7 +327,7 @@ def _warm_up(methods: Sequence[str], params: Mapping[str, Any], baseline: bool) 
         varflow.flow(f0, f1, "tvl1")
     for m in methods:
         try:
-            varflow.track(np.stack([f0, f1, f0]), 1, m, params=params[m])
+            varflow.track(np.stack([f0, f1, f0]), 1, spec_name(m), params=params[m])
         except Exception as exc:  # noqa: BLE001 - a warm-up only; the real run reports
             log.warning("warm-up of %s failed (%s); its time includes compilation", m, exc)
 
@@ -359,7 +362,7 @@ def _run_clip(
     for m in methods:
         bar.set_postfix_str(f"{label} {m}")
         t0 = time.perf_counter()
-        traj = varflow.track(frames, ref, m, params=params[m])
+        traj = varflow.track(frames, ref, spec_name(m), params=params[m])
         seconds = time.perf_counter() - t0
         row = {**base, "method": m, **_score(traj[ref + 1], gt, valid, occ),
                "seconds": seconds}
@@ -612,16 +615,18 @@ PROTOCOL_PASS = "final"
 
 #: Default trajectory methods, reference frame numbers (1-based, as in the file names)
 #: and window lengths of :func:`run_sintel_trajectories`.
-PROTOCOL_METHODS: tuple[str, ...] = ("twoframe", "mfsf", "rlr")
+PROTOCOL_METHODS: tuple[str, ...] = ("twoframe", "twoframe:tvl1-ld", "mfsf",
+                                     "rlr:link_weight=0", "rlr")
 PROTOCOL_REFS: tuple[int, ...] = (5, 6, 7, 8, 9, 10)
 PROTOCOL_WINDOWS: tuple[int, ...] = (9, 13, 19)
 
 #: The method the others are compared with by :func:`format_protocol_table`.
 PROTOCOL_BASELINE = "twoframe"
 
-#: Methods whose estimate of frame r + 1 does not depend on the window: TV-L1 from r to
-#: r + 1 for ``twoframe``.  :func:`run_sintel_trajectories` runs them once per
-#: reference on the two frames r, r + 1 and reuses the result for every window.
+#: Methods whose estimate of frame r + 1 does not depend on the window: the two-frame
+#: flow from r to r + 1 for ``twoframe`` (any ``flow_method``).
+#: :func:`run_sintel_trajectories` runs them once per reference on the two frames
+#: r, r + 1 and reuses the result for every window.
 SHARED_METHODS: frozenset[str] = frozenset({"twoframe"})
 
 
@@ -1032,7 +1037,7 @@ def run_sintel_trajectories(
     from tqdm import tqdm
 
     if methods is None:
-        methods = [m for m in PROTOCOL_METHODS if m in TRACKERS]
+        methods = [m for m in PROTOCOL_METHODS if spec_name(m) in TRACKERS]
     methods, params = tracker_params(methods, overrides)
     crop = _check_crop(crop)
     base_dir = data_root(root)
@@ -1041,8 +1046,8 @@ def run_sintel_trajectories(
     frames, truth = _load_protocol_data(base_dir, clip, pass_, plan, crop)
     if warm_up:
         _warm_up(methods, params, False)
-    shared = [m for m in methods if m in SHARED_METHODS]
-    windowed = [m for m in methods if m not in SHARED_METHODS]
+    shared = [m for m in methods if spec_name(m) in SHARED_METHODS]
+    windowed = [m for m in methods if spec_name(m) not in SHARED_METHODS]
     total = sum(len(shared) + len(wins) * len(windowed) for wins in plan.values())
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=total, desc="sintel-trajectories", unit="run", file=sys.stderr,
@@ -1054,7 +1059,7 @@ def run_sintel_trajectories(
         bar.set_postfix_str(f"r={r} {numbers[0]:04d}-{numbers[-1]:04d} {m}")
         clip_frames = np.stack([frames[n] for n in numbers])
         t0 = time.perf_counter()
-        traj = varflow.track(clip_frames, ref_index, m, params=params[m])
+        traj = varflow.track(clip_frames, ref_index, spec_name(m), params=params[m])
         seconds = time.perf_counter() - t0
         scores = _score(traj[ref_index + 1], *truth[r])
         log.info("%s r=%d frames %04d-%04d %s: AEE %.4f AAE %.3f in %.2fs", clip, r,

@@ -38,7 +38,7 @@ from ...generators.photo import FAMILIES, SPLITS, make_photo_clip, photo_cases
 from ...generators.sequences import SCENES, VARIANTS, benchmark_suite
 from ...registry import TRACKERS, get_tracker, make_track_params
 from ..trajectory_metrics import occlusion_accuracy, trajectory_errors
-from .common import _nanmean, _num, markdown_table, split_overrides
+from .common import _nanmean, _num, markdown_table, spec_name, split_overrides
 
 __all__ = [
     "run_trajectories",
@@ -61,9 +61,12 @@ log = logging.getLogger(__name__)
 def tracker_params(
     methods: Sequence[str], overrides: Mapping[str, Any] | None
 ) -> tuple[list[str], dict[str, Any]]:
-    """Check trajectory method names and build each one's parameters.
+    """Check trajectory method specs and build each one's parameters.
 
-    ``overrides`` are distributed by :func:`varflow.evaluation.bench.common.split_overrides`.
+    ``methods`` are specs (:func:`~varflow.evaluation.bench.common.method_spec`: a
+    name, optionally with ``:field=value`` parts, e.g. ``rlr:link_weight=0`` or
+    ``twoframe:tvl1-ld``); ``overrides`` are distributed by
+    :func:`varflow.evaluation.bench.common.split_overrides`.
 
     Returns
     -------
@@ -76,13 +79,13 @@ def tracker_params(
     ValueError
         No method, an unknown method or parameter, or an invalid value.
     """
-    methods = list(methods)
+    methods = list(dict.fromkeys(methods))
     if not methods:
         raise ValueError("methods: need at least one trajectory method")
     for m in methods:
-        get_tracker(m)
+        get_tracker(spec_name(m))
     per_method = split_overrides(methods, overrides, registry=TRACKERS)
-    return methods, {m: make_track_params(m, **per_method[m]) for m in methods}
+    return methods, {m: make_track_params(spec_name(m), **per_method[m]) for m in methods}
 
 
 def run_trajectories(
@@ -138,7 +141,7 @@ def run_trajectories(
             for m in methods:
                 bar.set_postfix_str(f"{seq.name}/{seq.variant} {m}")
                 t0 = time.perf_counter()
-                est = varflow.track(seq.frames, seq.ref, m, params=params[m])
+                est = varflow.track(seq.frames, seq.ref, spec_name(m), params=params[m])
                 seconds = time.perf_counter() - t0
                 err = trajectory_errors(est, seq.trajectories, seq.visibility, ref=seq.ref)
                 rows.append({"scene": seq.name, "variant": seq.variant, "method": m,
@@ -314,7 +317,7 @@ def _warm_up_photo(frames: np.ndarray, methods: Sequence[str], params: Mapping[s
     crop = np.ascontiguousarray(frames[:3, :48, :64])
     for m in methods:
         try:
-            varflow.track(crop, 1, m, params=params[m], return_visibility=True)
+            varflow.track(crop, 1, spec_name(m), params=params[m], return_visibility=True)
         except Exception as exc:  # noqa: BLE001 - a warm-up only; the real run reports
             log.warning("warm-up of %s failed (%s); its time includes compilation", m, exc)
 
@@ -393,8 +396,8 @@ def run_photo_trajectories(
             for m in methods:
                 bar.set_postfix_str(f"{split} {family}/{seed} {m}")
                 t0 = time.perf_counter()
-                est, visible = varflow.track(clip.frames, clip.ref, m, params=params[m],
-                                             return_visibility=True)
+                est, visible = varflow.track(clip.frames, clip.ref, spec_name(m),
+                                             params=params[m], return_visibility=True)
                 seconds = time.perf_counter() - t0
                 err = trajectory_errors(est, clip.trajectories, clip.visibility, ref=clip.ref)
                 occ = occlusion_accuracy(visible, clip.visibility, clip.ref)
