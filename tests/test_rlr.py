@@ -107,8 +107,9 @@ def test_certified_prox_on_degenerate_terms():
         assert np.all(e_v <= e_ref + 1e-6)
 
 
-@pytest.mark.parametrize("exact", [False, True])
-def test_ustep_numba_matches_numpy(exact):
+@pytest.mark.parametrize("exact, huber", [(False, 0.0), (True, 0.0), (False, 0.05),
+                                          (True, 0.05)])
+def test_ustep_numba_matches_numpy(exact, huber):
     h, w = 12, 15
     ix, iy, a = _terms(h, w, 3)
     g = (0.5 + RNG.random((h, w))).astype(np.float32)
@@ -119,7 +120,7 @@ def test_ustep_numba_matches_numpy(exact):
         q = np.zeros((a.shape[0], h, w), np.float32)
         n = kern(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0), np.float32(40),
                  np.float32(0.25),
-                 30, np.float32(0), 1, exact, _row_blocks(h))
+                 30, np.float32(0), 1, exact, _row_blocks(h), np.float32(huber))
         assert n == 30
         outs.append((u, p))
     np.testing.assert_allclose(outs[0][0], outs[1][0], atol=2e-4)
@@ -178,14 +179,23 @@ def small_seq():
                          variant="gaussian")
 
 
-def test_link_weight_zero_gives_independent_two_frame_problems(small_seq):
+#: The data term and regulariser of ``tvl1`` (grey channel, gradient constancy, Huber-TV)
+FULL_ENERGY = {"grey": True, "data_weight": 15.0, "gradient_weight": 140.0, "huber": 0.02,
+               "edge_weight": 30.0, "texture_alpha": 0.3}
+
+
+@pytest.mark.parametrize("energy", [{}, FULL_ENERGY,
+                                    {**FULL_ENERGY, "data_normalisation": 0.05}])
+def test_link_weight_zero_gives_independent_two_frame_problems(small_seq, energy):
+    """τ = 0 decouples the U-step into independent problems of the chosen energy."""
     s = small_seq
     frames = check_frames(s.frames)
     # with independent initial flows, no visibility mask (the default propagation
     # initialises a frame from its neighbours) and no final repair (which skips the
-    # frames next to the reference: frame 1 of each pair)
+    # frames next to the reference: frame 1 of each pair); the noise rule reads the
+    # clip (ref and ref + 1), so it stays off for the pairs to see the same weights
     params = RLRParams(link_weight=0.0, n_warps=2, max_iterations=20, init="twoframe",
-                       visibility=False, final_repair=False)
+                       visibility=False, final_repair=False, noise_reference=0.0, **energy)
     joint = track_rlr(frames, s.ref, params)
     assert np.all(joint[s.ref] == 0)
     for n in (0, 2, 6):
@@ -289,8 +299,8 @@ def test_adjacent_link_factor_follows_the_frames_noise():
      ("hidden_link_weight", -1.0), ("hidden_data_weight", 1.5), ("rank_rule", "svd"),
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
-     ("gradient_weight", 40.0), ("data_normalisation", 0.05), ("huber", 0.02),
-     ("sharpness_match", True), ("noise_reference", 0.01),
+     ("gradient_weight", -1.0), ("data_normalisation", -0.05), ("huber", -0.02),
+     ("sharpness_match", True), ("noise_reference", -0.01),
      ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):

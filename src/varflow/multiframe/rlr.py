@@ -9,7 +9,12 @@ low-rank matrix ``L``::
 
 with ``ρ_{n,c}`` the colour constancy residual of frame ``n`` against the reference,
 linearised around the current estimate and re-warped coarse to fine, and ``g`` the
-edge weight of the reference frame.  The frames are coupled only through ``L``.
+edge weight of the reference frame.  The data term is TV-L1's whole one (issue 27):
+the channels of :func:`varflow.twoframe.tvl1.data_channels` — colour or grey
+(``grey``), gradient constancy (γ = ``gradient_weight``), the normalisation ζ
+(``data_normalisation``) — with TV-L1's noise rule (``noise_reference``,
+:func:`clip_noise_rule`), and the TV may be Huber-TV (``huber``); the book's energy
+is the case γ = ζ = ε_H = 0.  The frames are coupled only through ``L``.
 It is minimised by alternation, after every warp of every pyramid level:
 
 1. **U-step** (``L`` fixed).  The energy splits into one problem per frame,
@@ -106,7 +111,12 @@ import numpy as np
 
 from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import noise_sigma, repair, repair_margin, support_weights
-from ..ops.prox import project_l2_ball, prox_linear_l1, prox_linear_l1_exact
+from ..ops.prox import (
+    project_l2_ball,
+    prox_huber_conjugate,
+    prox_linear_l1,
+    prox_linear_l1_exact,
+)
 from ..ops.pyramid import resize_bilinear, resize_flow
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import (
@@ -127,9 +137,8 @@ from ..twoframe.tvl1 import (
     _ordered_sum,
     _primal_row,
     _row_blocks,
+    data_channels,
     edge_weight,
-    linearise,
-    require_plain_tvl1,
 )
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
@@ -151,6 +160,7 @@ __all__ = [
     "refine_trajectories",
     "track_rlr",
     "adjacent_factor",
+    "clip_noise_rule",
     "ustep_iterations",
     "ustep_iterations_numpy",
     "prox_faces",
@@ -169,10 +179,14 @@ class MultiFrameParams(PlainTVL1Params):
     The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` serve the two-frame
     initialisation (``init="twoframe"``) and are shared by the multi-frame
     refinement: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…), the
-    pre-processing, the median filter, λ_D = ``data_weight``, the edge weight
-    (``edge_weight``, ``edge_weight_min``) and ``max_iterations`` (also the
-    primal-dual iterations per warp and alternation of the U-step); ``tolerance``
-    only serves the initialisation (see ``ustep_tolerance``).
+    pre-processing, the median filter, the data term (λ_D = ``data_weight``, γ =
+    ``gradient_weight``, ζ = ``data_normalisation``, ``grey``, the noise rule
+    ``noise_reference``), Huber-TV (``huber``), the edge weight (``edge_weight``,
+    ``edge_weight_min``) and ``max_iterations`` (also the primal-dual iterations per
+    warp and alternation of the U-step); ``tolerance`` only serves the
+    initialisation (see ``ustep_tolerance``).  The defaults are the book's plain
+    energy (:class:`~varflow.twoframe.tvl1.PlainTVL1Params`); ``sharpness_match``
+    matches two frames and stays off.
 
     Attributes
     ----------
@@ -308,13 +322,9 @@ class MultiFrameParams(PlainTVL1Params):
                f"must be >= 1, got {self.propagate_levels}")
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
-        require_plain_tvl1(self, "the multi-frame U-step")  # not in the U-step yet
         _check(not self.sharpness_match, "sharpness_match",
                "must be False here: it matches two frames, the multi-frame methods "
                "see a whole clip")
-        _check(self.noise_reference == 0, "noise_reference",
-               "must be 0 here: the multi-frame methods read the noise themselves "
-               f"(adjacent_noise), got {self.noise_reference}")
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",
@@ -927,12 +937,13 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol, n_sweeps,
-                     exact, blocks):
+                     exact, blocks, huber=_F0):
     """Numba primal-dual (Condat / Chambolle-Pock) iterations of one frame's U-step.
 
     Minimises ``λ Σ_k |a_k + (ix_k, iy_k)·u| + Σ_x g (|∇u_1| + |∇u_2|)`` (the data and
-    link terms of :func:`link_channels`, the TV weight folded into ``g``); updates
-    ``u``, ``p``, ``q`` and the scratch ``ubar`` in place.
+    link terms of :func:`link_channels`, the TV weight folded into ``g``), with
+    Huber-TV ``g h_ε(|∇u_k|)`` when ``huber`` = ε_H > 0; updates ``u``, ``p``, ``q``
+    and the scratch ``ubar`` in place.
 
     Parameters
     ----------
@@ -965,6 +976,9 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
         the coordinate-descent point.
     blocks : (n+1,) int64
         Row-block bounds.
+    huber : float
+        ε_H of Huber-TV (the dual step becomes the prox of its conjugate, as in
+        TV-L1's :func:`~varflow.twoframe.tvl1.tvl1_iterations`); 0 gives TV.
 
     Returns
     -------
@@ -988,14 +1002,14 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
                                             t, n_sweeps, exact, sc[b])
         for b in nb.prange(n_blk):
             for i in range(blocks[b], blocks[b + 1]):
-                _dual_row(ubar, p, p, g, _NO_TENSOR, i, sigma, False)
+                _dual_row(ubar, p, p, g, _NO_TENSOR, i, sigma, False, huber)
         if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
 
 def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol,
-                           n_sweeps, exact, blocks=None):
+                           n_sweeps, exact, blocks=None, huber=0.0):
     """NumPy reference of :func:`ustep_iterations` (same arguments, in-place updates)."""
     _, h, w = a.shape
     t = float(lam) * float(s)
@@ -1018,7 +1032,11 @@ def ustep_iterations_numpy(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_ite
         u[...] = np.moveaxis(d, -1, 0)
         ubar[...] = 2 * u - old
         for k in (0, 1):
-            pk = project_l2_ball(hw(p[2 * k: 2 * k + 2]) + sigma * gradient(ubar[k]), g)
+            pk = hw(p[2 * k: 2 * k + 2]) + sigma * gradient(ubar[k])
+            if huber > 0:  # the prox of the conjugate of g h_ε: shrink, then project
+                pk = prox_huber_conjugate(pk, sigma, float(huber), g)
+            else:
+                pk = project_l2_ball(pk, g)
             p[2 * k: 2 * k + 2] = np.moveaxis(pk, -1, 0)
         if float(((u - old) ** 2).sum()) / (h * w) < tol * tol:
             break
@@ -1131,25 +1149,51 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
 
 def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
                       visible: np.ndarray | None, hidden_data_weight: float,
-                      link_ratio: Any) -> tuple:
+                      link_ratio: Any, params: MultiFrameParams, level_state: dict) -> tuple:
     """One frame's data term linearised about ``about`` (and its link channels).
 
-    Built when the frame's U-step needs it, so that the warped planes of all frames
-    are never held at once.  ``visible`` (H, W) bool or None; ``link_ratio`` None
-    (no l1 link) or the link-to-data ratio (scalar or (H, W)).
+    The channels of the two-frame energy, built by TV-L1's own
+    :func:`~varflow.twoframe.tvl1.data_channels` (the colour or grey term and, with
+    γ > 0, gradient constancy; ζ > 0 normalises them), so that the U-step has the
+    data term of ``tvl1``.  Built when the frame's U-step needs it, so that the
+    warped planes of all frames are never held at once.  ``visible`` (H, W) bool or
+    None; ``link_ratio`` None (no l1 link) or the link-to-data ratio (scalar or
+    (H, W)); ``level_state`` the level's dict shared by the frames (it caches the
+    reference's smoothed gradients).
     """
     n_ch = i0.shape[2]
     warped, inside = warp_bicubic(derivative_planes(i1), about)
     if visible is not None and hidden_data_weight == 0:
         inside &= visible
-    lin = linearise(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
-                    warped[..., 2 * n_ch:], inside, about)
+    lin = data_channels(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
+                        warped[..., 2 * n_ch:], inside, about, params, level_state)
     if visible is not None and 0 < hidden_data_weight < 1:
         fac = np.where(visible, np.float32(1), np.float32(hidden_data_weight))
         lin = tuple((c * fac).astype(np.float32) for c in lin)
     if link_ratio is None:
         return lin
     return link_channels(*lin, np.zeros((2,) + i0.shape[:2], np.float32), link_ratio)
+
+
+def clip_noise_rule(params: MultiFrameParams, frames: np.ndarray, ref: int,
+                    stats: dict | None = None) -> MultiFrameParams:
+    """TV-L1's noise rule (``noise_reference``) read off a clip.
+
+    :meth:`~varflow.twoframe.tvl1.TVL1Params.for_frames` of the reference and the
+    frame next to it (``ref + 1``, or ``ref − 1`` at the end of the clip), on the
+    working channels: the data weights λ and γ are scaled by ``σ_0/σ̂`` on noisy
+    footage, for the initial flows, the visibility's backward flows and the U-step
+    alike.  ``stats`` gains ``noise_sigma`` and ``data_scale`` when the rule is on.
+    """
+    if params.noise_reference <= 0 or frames.shape[0] < 2:
+        return params
+    near = ref + 1 if ref + 1 < frames.shape[0] else ref - 1
+    pair_stats: dict = {}
+    out = params.for_frames(working_channels(frames[ref], params),
+                            working_channels(frames[near], params), pair_stats)
+    if stats is not None:
+        stats.update(pair_stats)
+    return out
 
 
 def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
@@ -1201,7 +1245,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         raise ValueError(f"coupling: kind must be 'l1' or 'l2', got {coupling.kind!r}")
     stats = {} if stats is None else stats
     t_start = time.perf_counter()
-    n_frames, height, width, n_ch = frames.shape
+    n_frames = frames.shape[0]
+    params = clip_noise_rule(params, frames, ref, stats)
     params = noise_adapted(params, (working_channels(frames[ref], params),), stats)
     others = [n for n in range(n_frames) if n != ref]
     pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
@@ -1241,7 +1286,9 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     a_adj = float(coupling.adjacent_factor)
     l1 = coupling.kind == "l1" and (weight > 0 or (visible is not None and w_hidden > 0))
     beta = np.float32(weight if coupling.kind == "l2" else 0.0)
-    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_ch == 1)
+    n_work = pyrs[ref][0].shape[2]  # the channels the energy works on (1 with grey)
+    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_work == 1)
+    huber = np.float32(params.huber)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
     t_u = 0.0
     coupling.seconds = 0.0
@@ -1270,7 +1317,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                               for wt in (weight, a_adj * weight))
         r_hid = np.float32(w_hidden / float(params.data_weight))
         r_hid_adj = np.float32(a_adj * w_hidden / float(params.data_weight))
-        q_all = np.zeros((n_frames, n_ch + (2 if l1 else 0), h, w), np.float32)
+        q_all: np.ndarray | None = None
+        level_state: dict = {"level": level}  # TV-L1's per-level cache (grad0)
         for _k in range(params.n_warps):
             # every alternation linearises about the flow at the start of the warp
             start = traj.copy() if params.alternations > 1 else traj
@@ -1289,16 +1337,19 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         rn = rn.astype(np.float32)
                     ix, iy, a = _linearised_frame(i0, pyrs[n][level], start[n], vis_n,
                                                   params.hidden_data_weight,
-                                                  rn if l1 else None)
+                                                  rn if l1 else None, params, level_state)
+                    n_data = a.shape[0] - (2 if l1 else 0)
                     tk = None if target is None else np.ascontiguousarray(
                         np.moveaxis(target[n], -1, 0))
                     if l1 and tk is not None:
-                        set_link_targets(a, n_ch, tk, rn)
+                        set_link_targets(a, n_data, tk, rn)
                     m = tk if (tk is not None and not l1) else no_target
                     u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
+                    if q_all is None:  # the data channels' count is known now
+                        q_all = np.zeros((n_frames,) + a.shape, np.float32)
                     kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
                            params.max_iterations, np.float32(params.ustep_tolerance),
-                           params.data_sweeps, exact, blocks)
+                           params.data_sweeps, exact, blocks, huber)
                     traj[n] = np.moveaxis(u, 0, -1)
                 t_u += time.perf_counter() - t1
             for n in others:
