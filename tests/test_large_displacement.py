@@ -197,7 +197,8 @@ def test_tracker_far_frames_follow_a_fast_object_with_matching():
     from varflow.multiframe.propagate import propagate_trajectories
     from varflow.multiframe.track import check_frames
 
-    init = propagate_trajectories(check_frames(frames), ref, varflow.make_track_params("rlr"),
+    init = propagate_trajectories(check_frames(frames), ref,
+                                  varflow.make_track_params("rlr").flow_params,
                                   matching=True, repair_adjacent=False)
     assert max(disc_epe(init)) < 4.0
     # ... and the tracker keeps most of it (the multi-frame refinement, which starts

@@ -9,13 +9,13 @@ from varflow.generators.sequences import make_sequence
 from varflow.multiframe.lowrank import trajectories_to_matrix
 from varflow.multiframe.mfsf import MFSFParams, dct_basis, pca_basis, track_mfsf
 from varflow.multiframe.rlr import (
-    RLRParams,
     link_channels,
     track_rlr,
     ustep_iterations,
     ustep_iterations_numpy,
 )
 from varflow.multiframe.track import check_frames
+from varflow.registry import make_track_params
 from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
 
 
@@ -87,14 +87,15 @@ def noisy_seq():
 def test_zero_weight_gives_the_decoupled_refinement_of_rlr(noisy_seq):
     s = noisy_seq
     frames = check_frames(s.frames)
-    a = track_mfsf(frames, s.ref, MFSFParams(subspace_weight=0.0, n_warps=2))
-    b = track_rlr(frames, s.ref, RLRParams(link_weight=0.0, hidden_link_weight=0.0, n_warps=2,
-                                           weighted_median_radius=0))
+    a = track_mfsf(frames, s.ref, make_track_params("mfsf", subspace_weight=0.0, n_warps=2))
+    b = track_rlr(frames, s.ref, make_track_params("rlr", link_weight=0.0, hidden_link_weight=0.0,
+                                                   n_warps=2, weighted_median_radius=0))
     np.testing.assert_array_equal(a, b)
     # and with the weighted median in both (RLR's default)
-    a = track_mfsf(frames, s.ref, MFSFParams(subspace_weight=0.0, n_warps=2,
-                                             weighted_median_radius=3))
-    b = track_rlr(frames, s.ref, RLRParams(link_weight=0.0, hidden_link_weight=0.0, n_warps=2))
+    a = track_mfsf(frames, s.ref, make_track_params("mfsf", subspace_weight=0.0, n_warps=2,
+                                                    weighted_median_radius=3))
+    b = track_rlr(frames, s.ref, make_track_params("rlr", link_weight=0.0, hidden_link_weight=0.0,
+                                                   n_warps=2))
     np.testing.assert_array_equal(a, b)
 
 

@@ -1,5 +1,7 @@
 """Robust Low-Rank trajectories: the U-step kernels, the exact prox, the driver."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -21,6 +23,7 @@ from varflow.multiframe.rlr import (
 from varflow.multiframe.track import check_frames
 from varflow.ops.differences import gradient
 from varflow.ops.prox import linear_l1_energy, prox_linear_l1_exact
+from varflow.registry import make_track_params
 from varflow.twoframe.tvl1 import _row_blocks, tvl1_iterations
 
 RNG = np.random.default_rng(7)
@@ -194,8 +197,9 @@ def test_link_weight_zero_gives_independent_two_frame_problems(small_seq, energy
     # initialises a frame from its neighbours) and no final repair (which skips the
     # frames next to the reference: frame 1 of each pair); the noise rule reads the
     # clip (ref and ref + 1), so it stays off for the pairs to see the same weights
-    params = RLRParams(link_weight=0.0, n_warps=2, max_iterations=20, init="twoframe",
-                       visibility=False, final_repair=False, noise_reference=0.0, **energy)
+    params = make_track_params("rlr", link_weight=0.0, n_warps=2, max_iterations=20,
+                               ustep_iterations=20, init="twoframe", visibility=False,
+                               final_repair=False, noise_reference=0.0, **energy)
     joint = track_rlr(frames, s.ref, params)
     assert np.all(joint[s.ref] == 0)
     for n in (0, 2, 6):
@@ -227,7 +231,8 @@ def test_exact_and_linear_lowrank_steps_find_the_same_rank(small_seq):
     # threshold 0.03 (the default 0.003 keeps a fourth, noise direction here).
     s = small_seq
     frames = check_frames(s.frames)
-    params = RLRParams(n_warps=2, max_iterations=20, rank_tol=0.03)
+    params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20,
+                               rank_tol=0.03)
     st_lin, st_ex = {}, {}
     lin = track_rlr(frames, s.ref, params, stats=st_lin)
     ex = track_rlr(frames, s.ref, params.replace(lowrank_method="exact"), stats=st_ex)
@@ -257,7 +262,8 @@ def test_adjacent_frames_take_their_own_link_weight(small_seq):
     # are pulled towards the target.
     s = small_seq
     frames = check_frames(s.frames)
-    params = RLRParams(n_warps=2, max_iterations=20, visibility=False, final_repair=False)
+    params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20,
+                               visibility=False, final_repair=False)
 
     def target(traj, visible):
         t = np.zeros_like(traj)
@@ -299,13 +305,37 @@ def test_adjacent_link_factor_follows_the_frames_noise():
      ("hidden_link_weight", -1.0), ("hidden_data_weight", 1.5), ("rank_rule", "svd"),
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
-     ("gradient_weight", -1.0), ("data_normalisation", -0.05), ("huber", -0.02),
-     ("sharpness_match", True), ("noise_reference", -0.01),
+     ("ustep_iterations", 0), ("flow_method", "tensor"), ("flow_method", "nope"),
      ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):
         RLRParams(**{field: value})
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("gradient_weight", -1.0), ("data_normalisation", -0.05), ("huber", -0.02),
+     ("sharpness_match", True), ("noise_reference", -0.01), ("n_warps", 0)])
+def test_invalid_energy_fields_name_the_field(field, value):
+    """The energy is composed: its fields route to flow_params and are checked there."""
+    with pytest.raises(ValueError, match=f"^{field}:"):
+        make_track_params("rlr", **{field: value})
+
+
+def test_the_energy_is_composed():
+    from varflow.twoframe.large_displacement import LargeDisplacementParams
+    from varflow.twoframe.tvl1 import PlainTVL1Params
+
+    p = RLRParams()
+    assert p.flow_method == "tvl1" and p.flow_params == PlainTVL1Params(weighted_median_radius=3)
+    q = make_track_params("rlr", flow_method="tvl1-ld", link_weight=1.0)
+    assert isinstance(q.flow_params, LargeDisplacementParams) and q.link_weight == 1.0
+    assert not q.flow_params.sharpness_match  # a method's defaults, the pair's match off
+    assert make_track_params("rlr", gradient_weight=140.0).flow_params.gradient_weight == 140
+    # no field is both the tracker's and the energy's
+    own = {f.name for f in dataclasses.fields(RLRParams)}
+    assert not own & {f.name for f in dataclasses.fields(PlainTVL1Params)}
 
 
 def test_rlr_is_registered_and_reachable_from_the_api(small_seq):

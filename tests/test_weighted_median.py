@@ -170,10 +170,10 @@ def test_defaults():
     assert TVL1Params().weighted_median_radius == 3
     assert PlainTVL1Params().weighted_median_radius == 0
     assert not TVL1Params().weighted_median_every_warp
-    assert RLRParams().weighted_median_radius == 3
+    assert RLRParams().flow_params.weighted_median_radius == 3
     assert TVL1Params().weighted_median_noise == 5.0
     assert TVL1Params().weighted_median_levels == 3
-    assert RLRParams().weighted_median_levels == 0  # every level
+    assert RLRParams().flow_params.weighted_median_levels == 0  # every level
 
 
 def test_levels_limit_where_it_applies():

@@ -126,28 +126,13 @@ def make_track_params(method: str | Tracker, params: Any = None, **overrides: An
     m = get_tracker(method) if isinstance(method, str) else method
     if "flow_params" not in {f.name for f in dataclasses.fields(m.params)}:
         return _make(m, params, **overrides)
-    own = {k: v for k, v in overrides.items() if k in track_fields(m.params)}
-    rest = {k: v for k, v in overrides.items() if k not in own}
-    base = params if params is not None else m.params(**{k: v for k, v in own.items()})
-    if params is not None and own:
-        if "flow_method" in own and "flow_params" not in own and \
-                own["flow_method"] != params.flow_method:
-            own["flow_params"] = None  # the new method's defaults
-        base = _make(m, params, **own)
+    base = params if params is not None else m.params()
     if not isinstance(base, m.params):
         raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
-    if not rest:
-        return base
-    flow_method = get_method(base.flow_method)
-    names = {f.name for f in dataclasses.fields(flow_method.params)}
-    unknown = sorted(set(rest) - names)
-    if unknown:
-        valid = sorted(names | set(track_fields(m.params)))
-        raise ValueError(
-            f"{unknown[0]}: not a parameter of method {m.name!r} with flow_method "
-            f"{base.flow_method!r} (valid: {', '.join(valid)})"
-        )
-    return dataclasses.replace(base, flow_params=dataclasses.replace(base.flow_params, **rest))
+    if "flow_method" in overrides and params is None:  # that method's defaults, not tvl1's
+        base = m.params(flow_method=overrides["flow_method"],
+                        flow_params=overrides.get("flow_params"))
+    return base.replace(**overrides) if overrides else base
 
 
 def track_fields(params_class: type) -> tuple[str, ...]:

@@ -127,11 +127,13 @@ from ..twoframe.coarse_to_fine import (
     noise_adapted,
     working_channels,
 )
+from ..twoframe.methods import DEFAULT_METHOD, METHODS
 from ..twoframe.tvl1 import (
     _F0,
     _F1,
     _NO_TENSOR,
     PlainTVL1Params,
+    TVL1Params,
     _data_prox_row,
     _dual_row,
     _ordered_sum,
@@ -143,7 +145,7 @@ from ..twoframe.tvl1 import (
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
 from .propagate import frame_pyramids, propagate_trajectories
-from .track import TrackCallback
+from .track import FlowTrackParams, TrackCallback
 from .visibility import VisibilityParams, backward_flows, visibility_from
 
 #: Offsets (pixels) of the final repair.  Tuning split of the photographic clips,
@@ -173,20 +175,26 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class MultiFrameParams(PlainTVL1Params):
-    """Fields shared by the multi-frame methods (RLR, MFSF).
+class MultiFrameParams(FlowTrackParams):
+    """Fields shared by the multi-frame methods (RLR, MFSF), and their two-frame energy.
 
-    The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` serve the two-frame
-    initialisation (``init="twoframe"``) and are shared by the multi-frame
-    refinement: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…), the
-    pre-processing, the median filter, the data term (λ_D = ``data_weight``, γ =
-    ``gradient_weight``, ζ = ``data_normalisation``, ``grey``, the noise rule
-    ``noise_reference``), Huber-TV (``huber``), the edge weight (``edge_weight``,
-    ``edge_weight_min``) and ``max_iterations`` (also the primal-dual iterations per
-    warp and alternation of the U-step); ``tolerance`` only serves the
-    initialisation (see ``ustep_tolerance``).  The defaults are the book's plain
-    energy (:class:`~varflow.twoframe.tvl1.PlainTVL1Params`); ``sharpness_match``
-    matches two frames and stays off.
+    Composed, not inherited (issue 27): ``flow_method`` and ``flow_params`` (of
+    :class:`~varflow.multiframe.track.FlowTrackParams`) are the two-frame method
+    whose energy the trajectories minimise, frame by frame, and whose flows
+    initialise them.  Its fields serve the initial flows and the multi-frame
+    refinement alike: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…),
+    the pre-processing, the median filters, the data term (λ_D = ``data_weight``,
+    γ = ``gradient_weight``, ζ = ``data_normalisation``, ``grey``, the noise rule
+    ``noise_reference``), Huber-TV (``huber``) and the edge weight
+    (``edge_weight``, ``edge_weight_min``); ``max_iterations`` and ``tolerance``
+    serve the two-frame flows (the U-step has ``ustep_iterations`` and
+    ``ustep_tolerance``).  :func:`varflow.registry.make_track_params` (and so
+    :func:`varflow.track` and the CLI) routes a field of the energy to
+    ``flow_params``.  The method must be TV-L1's (``tvl1``, ``tvl1-fast``,
+    ``tvl1-ld``: the U-step has its data term and isotropic TV); its
+    ``sharpness_match`` matches two frames and must be off (a method named without
+    ``flow_params`` takes its defaults with it off).  The energy of ``tvl1`` named
+    without ``flow_params`` is :meth:`default_energy`.
 
     Attributes
     ----------
@@ -196,6 +204,9 @@ class MultiFrameParams(PlainTVL1Params):
     primal_step : float
         s, primal step of the primal-dual iteration; the dual step is
         σ = 1 / (8 s) (so that s σ ||∇||² ≤ 1).  Default 0.25.
+    ustep_iterations : int
+        Primal-dual iterations of the U-step per warp and alternation.  Default 50
+        (the plain energy's ``max_iterations``, which served both before).
     alternations : int
         Coupling-target / U-step alternations per warp.  Default 1.
     data_prox : {"auto", "exact", "cd"}
@@ -282,6 +293,7 @@ class MultiFrameParams(PlainTVL1Params):
 
     tv_weight: float = 1.0
     primal_step: float = 0.25
+    ustep_iterations: int = 50
     alternations: int = 1
     data_prox: str = "auto"
     init: str = "propagate"
@@ -299,8 +311,31 @@ class MultiFrameParams(PlainTVL1Params):
     repair_adjacent: bool = False
     hidden_data_weight: float = 0.0
 
+    @classmethod
+    def default_energy(cls) -> TVL1Params:
+        """The two-frame parameters when ``flow_params`` is not given: the book's plain
+        energy (:class:`~varflow.twoframe.tvl1.PlainTVL1Params`)."""
+        return PlainTVL1Params()
+
     def __post_init__(self) -> None:
+        if self.flow_params is None:
+            method = METHODS.get(self.flow_method) if isinstance(self.flow_method, str) else None
+            if self.flow_method == DEFAULT_METHOD:
+                object.__setattr__(self, "flow_params", type(self).default_energy())
+            elif method is not None:  # that method's defaults, without the pair's match
+                defaults = method.params()
+                if getattr(defaults, "sharpness_match", False):
+                    defaults = replace(defaults, sharpness_match=False)
+                object.__setattr__(self, "flow_params", defaults)
         super().__post_init__()
+        _check(METHODS[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
+               f"the multi-frame U-step has TV-L1's energy (isotropic TV); "
+               f"{self.flow_method!r} is not a TV-L1 method")
+        _check(not self.flow_params.sharpness_match, "sharpness_match",
+               "must be False here: it matches two frames, the multi-frame methods "
+               "see a whole clip")
+        _check(self.ustep_iterations >= 1, "ustep_iterations",
+               f"must be >= 1, got {self.ustep_iterations}")
         _check(self.tv_weight > 0, "tv_weight", f"must be > 0, got {self.tv_weight}")
         _check(self.primal_step > 0, "primal_step", f"must be > 0, got {self.primal_step}")
         _check(self.alternations >= 1, "alternations", f"must be >= 1, got {self.alternations}")
@@ -322,9 +357,6 @@ class MultiFrameParams(PlainTVL1Params):
                f"must be >= 1, got {self.propagate_levels}")
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
-        _check(not self.sharpness_match, "sharpness_match",
-               "must be False here: it matches two frames, the multi-frame methods "
-               "see a whole clip")
         _check(self.visibility_levels >= 1, "visibility_levels",
                f"must be >= 1, got {self.visibility_levels}")
         _check(self.visibility_warps >= 1, "visibility_warps",
@@ -421,14 +453,13 @@ class RLRParams(MultiFrameParams):
         (:func:`varflow.multiframe.lowrank.l1_regression`, ``tol``).  The fit is a
         target for the next U-step, not a result: 1e-4 differs from 1e-7 by
         2.5e-4 px on average and takes 0.6× the iterations.  Default 1e-4.
-    weighted_median_radius : int
-        As in :class:`varflow.twoframe.coarse_to_fine.CoarseToFineParams`: the
-        weighted median near motion boundaries after each level's last warp, in
-        the initial two-frame flows and in the multi-frame refinement (every
-        frame's displacement, guided by the reference frame).  Default 3, as
-        ``tvl1`` but on every level (``weighted_median_levels`` 0) with the
-        colour guide (RubberWhale frame-11 AEE 0.0952 against 0.0987 without;
-        the two-frame ``tvl1`` flow 0.0970).
+
+    The default energy (:meth:`default_energy`) is the book's plain one with the
+    weighted median (``weighted_median_radius`` 3, as ``tvl1`` but on every level,
+    ``weighted_median_levels`` 0, with the colour guide), after each level's last
+    warp in the initial two-frame flows and in the multi-frame refinement (every
+    frame's displacement, guided by the reference frame): RubberWhale frame-11 AEE
+    0.0952 against 0.0987 without; the two-frame ``tvl1`` flow 0.0970.
     """
 
     link_weight: float = 2.0
@@ -446,7 +477,11 @@ class RLRParams(MultiFrameParams):
     lowrank_strata: int = 8
     level_basis: bool = True
     lowrank_tolerance: float = 1e-4
-    weighted_median_radius: int = 3
+
+    @classmethod
+    def default_energy(cls) -> TVL1Params:
+        """The plain energy with the weighted median (see the class notes)."""
+        return PlainTVL1Params(weighted_median_radius=3)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -1096,7 +1131,7 @@ def _link_ratio(weight: float, params: MultiFrameParams, g: np.ndarray,
                 edge_scaled: bool) -> Any:
     """``τ/λ_D`` of a link weight at a level: a scalar, or ``(h, w)`` when scaled by the
     edge weight ``g`` (which holds λ_TV) or zero (so that the link channels exist)."""
-    r = np.float32(weight / float(params.data_weight))
+    r = np.float32(weight / float(params.flow_params.data_weight))
     if edge_scaled:
         return np.ascontiguousarray(r * g / np.float32(params.tv_weight), np.float32)
     return np.full(g.shape, r, np.float32) if r == 0 else r
@@ -1130,7 +1165,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     ndarray, shape (F, H, W, 2), float32
     """
     if params.init == "propagate":
-        return propagate_trajectories(frames, ref, params, pyramids,
+        return propagate_trajectories(frames, ref, params.flow_params, pyramids,
                                       repair_adjacent=params.repair_adjacent,
                                       levels=params.propagate_levels,
                                       direct=params.propagate_direct,
@@ -1140,7 +1175,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         others = [n for n in range(frames.shape[0]) if n != ref]
         for i, n in enumerate(others):
             traj[n] = coarse_to_fine_pyramids(pyramids[ref], pyramids[n], tvl1_solve_warp,
-                                              params)
+                                              params.flow_params)
             if callback is not None:
                 callback(i + 1, len(others))
         return traj
@@ -1149,7 +1184,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
 
 def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
                       visible: np.ndarray | None, hidden_data_weight: float,
-                      link_ratio: Any, params: MultiFrameParams, level_state: dict) -> tuple:
+                      link_ratio: Any, energy: TVL1Params, level_state: dict) -> tuple:
     """One frame's data term linearised about ``about`` (and its link channels).
 
     The channels of the two-frame energy, built by TV-L1's own
@@ -1166,7 +1201,7 @@ def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
     if visible is not None and hidden_data_weight == 0:
         inside &= visible
     lin = data_channels(i0, warped[..., :n_ch], warped[..., n_ch:2 * n_ch],
-                        warped[..., 2 * n_ch:], inside, about, params, level_state)
+                        warped[..., 2 * n_ch:], inside, about, energy, level_state)
     if visible is not None and 0 < hidden_data_weight < 1:
         fac = np.where(visible, np.float32(1), np.float32(hidden_data_weight))
         lin = tuple((c * fac).astype(np.float32) for c in lin)
@@ -1177,23 +1212,25 @@ def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
 
 def clip_noise_rule(params: MultiFrameParams, frames: np.ndarray, ref: int,
                     stats: dict | None = None) -> MultiFrameParams:
-    """TV-L1's noise rule (``noise_reference``) read off a clip.
+    """TV-L1's noise rule (``noise_reference`` of the energy) read off a clip.
 
     :meth:`~varflow.twoframe.tvl1.TVL1Params.for_frames` of the reference and the
     frame next to it (``ref + 1``, or ``ref − 1`` at the end of the clip), on the
-    working channels: the data weights λ and γ are scaled by ``σ_0/σ̂`` on noisy
-    footage, for the initial flows, the visibility's backward flows and the U-step
-    alike.  ``stats`` gains ``noise_sigma`` and ``data_scale`` when the rule is on.
+    working channels: the data weights λ and γ of ``params.flow_params`` are scaled
+    by ``σ_0/σ̂`` on noisy footage, for the initial flows, the visibility's
+    backward flows and the U-step alike.  ``stats`` gains ``noise_sigma`` and
+    ``data_scale`` when the rule is on.
     """
-    if params.noise_reference <= 0 or frames.shape[0] < 2:
+    energy = params.flow_params
+    if energy.noise_reference <= 0 or frames.shape[0] < 2:
         return params
     near = ref + 1 if ref + 1 < frames.shape[0] else ref - 1
     pair_stats: dict = {}
-    out = params.for_frames(working_channels(frames[ref], params),
-                            working_channels(frames[near], params), pair_stats)
+    out = energy.for_frames(working_channels(frames[ref], energy),
+                            working_channels(frames[near], energy), pair_stats)
     if stats is not None:
         stats.update(pair_stats)
-    return out
+    return params if out is energy else replace(params, flow_params=out)
 
 
 def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
@@ -1247,9 +1284,11 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     t_start = time.perf_counter()
     n_frames = frames.shape[0]
     params = clip_noise_rule(params, frames, ref, stats)
-    params = noise_adapted(params, (working_channels(frames[ref], params),), stats)
+    energy = params.flow_params
+    energy = noise_adapted(energy, (working_channels(frames[ref], energy),), stats)
+    params = replace(params, flow_params=energy)
     others = [n for n in range(n_frames) if n != ref]
-    pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
+    pyrs = frame_pyramids(frames, energy) if pyramids is None else pyramids
     shapes = [p.shape[:2] for p in pyrs[ref]]
     n_levels = len(shapes)
     n_run = n_levels
@@ -1257,7 +1296,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         n_run = min(params.refine_levels, n_levels)
     n_init = len(others) if params.init != "zero" else 0
     n_vis = len(others) if params.visibility else 0
-    total = n_init + n_vis + n_run * params.n_warps
+    total = n_init + n_vis + n_run * energy.n_warps
     done = 0
 
     def tick(*_: Any) -> None:
@@ -1273,13 +1312,13 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     if params.visibility:
         t0 = time.perf_counter()
         vparams = params.visibility_params()
-        bparams = replace(params, n_warps=params.visibility_warps)
+        bparams = replace(energy, n_warps=params.visibility_warps)
         back = backward_flows(init, ref, pyrs, bparams, vparams.backward_levels, tick,
                               splat=params.propagate_matching)
         visible = visibility_from(init, back, ref, [p[0] for p in pyrs], vparams)
         stats["visibility_seconds"] = time.perf_counter() - t0
 
-    lam = np.float32(params.data_weight)
+    lam = np.float32(energy.data_weight)
     s = np.float32(params.primal_step)
     weight = float(coupling.weight)
     w_hidden = weight if coupling.hidden_weight is None else float(coupling.hidden_weight)
@@ -1288,7 +1327,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     beta = np.float32(weight if coupling.kind == "l2" else 0.0)
     n_work = pyrs[ref][0].shape[2]  # the channels the energy works on (1 with grey)
     exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_work == 1)
-    huber = np.float32(params.huber)
+    huber = np.float32(energy.huber)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
     t_u = 0.0
     coupling.seconds = 0.0
@@ -1296,7 +1335,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
     del init  # not needed again; one (F, H, W, 2) array less at the peak
     p_all: np.ndarray | None = None
-    guide = guide_pyramid(working_channels(frames[ref], params), params, shapes)
+    guide = guide_pyramid(working_channels(frames[ref], energy), energy, shapes)
     for level in range(n_run - 1, -1, -1):
         h, w = shapes[level]
         if traj.shape[1:3] != (h, w):
@@ -1304,7 +1343,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         vis_l = None if visible is None else np.stack(
             [_level_mask(visible[n], (h, w)) for n in range(n_frames)])
         i0 = pyrs[ref][level]
-        g = edge_weight(i0, params.edge_weight, params.edge_weight_min)
+        g = edge_weight(i0, energy.edge_weight, energy.edge_weight_min)
         g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
         if p_all is None:
             p_all = np.zeros((n_frames, 4, h, w), np.float32)
@@ -1315,11 +1354,11 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         no_target = np.zeros((2, 1, 1), np.float32)
         ratio_map, adj_map = (_link_ratio(wt, params, g, coupling.edge_scaled)
                               for wt in (weight, a_adj * weight))
-        r_hid = np.float32(w_hidden / float(params.data_weight))
-        r_hid_adj = np.float32(a_adj * w_hidden / float(params.data_weight))
+        r_hid = np.float32(w_hidden / float(energy.data_weight))
+        r_hid_adj = np.float32(a_adj * w_hidden / float(energy.data_weight))
         q_all: np.ndarray | None = None
         level_state: dict = {"level": level}  # TV-L1's per-level cache (grad0)
-        for _k in range(params.n_warps):
+        for _k in range(energy.n_warps):
             # every alternation linearises about the flow at the start of the warp
             start = traj.copy() if params.alternations > 1 else traj
             for _a in range(params.alternations):
@@ -1337,7 +1376,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         rn = rn.astype(np.float32)
                     ix, iy, a = _linearised_frame(i0, pyrs[n][level], start[n], vis_n,
                                                   params.hidden_data_weight,
-                                                  rn if l1 else None, params, level_state)
+                                                  rn if l1 else None, energy, level_state)
                     n_data = a.shape[0] - (2 if l1 else 0)
                     tk = None if target is None else np.ascontiguousarray(
                         np.moveaxis(target[n], -1, 0))
@@ -1348,13 +1387,13 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                     if q_all is None:  # the data channels' count is known now
                         q_all = np.zeros((n_frames,) + a.shape, np.float32)
                     kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
-                           params.max_iterations, np.float32(params.ustep_tolerance),
-                           params.data_sweeps, exact, blocks, huber)
+                           params.ustep_iterations, np.float32(params.ustep_tolerance),
+                           energy.data_sweeps, exact, blocks, huber)
                     traj[n] = np.moveaxis(u, 0, -1)
                 t_u += time.perf_counter() - t1
             for n in others:
-                traj[n] = filter_flow(traj[n], params, None if guide is None else guide[level],
-                                      last_warp=_k == params.n_warps - 1, level=level)
+                traj[n] = filter_flow(traj[n], energy, None if guide is None else guide[level],
+                                      last_warp=_k == energy.n_warps - 1, level=level)
             tick()
     traj[ref] = 0.0
     if params.final_repair:
@@ -1367,7 +1406,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     if back is not None:
         visible = visibility_from(traj, back, ref, [p[0] for p in pyrs],
                                   params.visibility_params())
-    stats.update(levels=n_run, warps=n_run * params.n_warps, ustep_seconds=t_u,
+    stats.update(levels=n_run, warps=n_run * energy.n_warps, ustep_seconds=t_u,
                  coupling_seconds=coupling.seconds, seconds=time.perf_counter() - t_start,
                  visible=visible)
     log.debug("multi-frame refinement: %d levels, U-step %.2fs, coupling %.2fs", n_run, t_u,

@@ -22,10 +22,11 @@ table is the flow a user already has.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -86,6 +87,25 @@ class FlowTrackParams:
         _check(isinstance(self.flow_params, method.params), "flow_params",
                f"expected {method.params.__name__} for method {self.flow_method!r}, got "
                f"{type(self.flow_params).__name__}")
+
+    def replace(self, **changes: Any) -> FlowTrackParams:
+        """A copy with ``changes``: the tracker's own fields, and the fields of the
+        two-frame parameters, which go to ``flow_params`` (a new ``flow_method``
+        without ``flow_params`` starts from that method's defaults)."""
+        own = {f.name for f in fields(self)}
+        mine = {k: v for k, v in changes.items() if k in own}
+        rest = {k: v for k, v in changes.items() if k not in own}
+        if "flow_method" in mine and "flow_params" not in mine and \
+                mine["flow_method"] != self.flow_method:
+            mine["flow_params"] = None
+        out = dataclasses.replace(self, **mine) if mine else self
+        if rest:
+            bad = sorted(set(rest) - {f.name for f in fields(out.flow_params)})
+            _check(not bad, bad[0] if bad else "", f"not a parameter of {type(self).__name__} "
+                   f"or of the {out.flow_method!r} parameters")
+            out = dataclasses.replace(out, flow_params=dataclasses.replace(out.flow_params,
+                                                                           **rest))
+        return out
 
 
 @dataclass(frozen=True)
