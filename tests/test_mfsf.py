@@ -87,7 +87,8 @@ def noisy_seq():
 def test_zero_weight_gives_the_decoupled_refinement_of_rlr(noisy_seq):
     s = noisy_seq
     frames = check_frames(s.frames)
-    a = track_mfsf(frames, s.ref, make_track_params("mfsf", subspace_weight=0.0, n_warps=2))
+    a = track_mfsf(frames, s.ref, make_track_params("mfsf", subspace_weight=0.0, n_warps=2,
+                                                    weighted_median_radius=0))
     b = track_rlr(frames, s.ref, make_track_params("rlr", link_weight=0.0, hidden_link_weight=0.0,
                                                    n_warps=2, weighted_median_radius=0))
     np.testing.assert_array_equal(a, b)

@@ -212,7 +212,8 @@ def test_rlr_beats_independent_two_frame_flows_on_a_noisy_sequence():
     # measured (2026-11-23): twoframe on the plain energy 0.136, rlr 0.072 px mean EPE;
     # 2026-12-01, against the library's own flow (issue 27): twoframe with tvl1 (the
     # default of varflow.flow) 0.1127, with tvl1-ld 0.1124, on the plain energy
-    # 0.1357; rlr 0.0766 (ratio 0.68), rlr with link_weight=0 0.142
+    # 0.1357; rlr 0.0766 (ratio 0.68), rlr with link_weight=0 0.142; with tvl1's energy
+    # (flow_params=TVL1_ENERGY) rlr 0.0896 (ratio 0.795 to both)
     s = make_sequence("affine", n_frames=12, shape=(64, 80), magnitude=4.0, seed=4,
                       variant="gaussian")
     rlr = varflow.track(s.frames, s.ref, "rlr")
@@ -324,11 +325,18 @@ def test_invalid_energy_fields_name_the_field(field, value):
 
 
 def test_the_energy_is_composed():
+    from varflow.multiframe.rlr import TVL1_ENERGY
     from varflow.twoframe.large_displacement import LargeDisplacementParams
-    from varflow.twoframe.tvl1 import PlainTVL1Params
+    from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
     p = RLRParams()
     assert p.flow_method == "tvl1" and p.flow_params == PlainTVL1Params(weighted_median_radius=3)
+    # tvl1's data term and regulariser, the plain energy's solver settings
+    tv = TVL1Params()
+    for f in ("grey", "data_weight", "gradient_weight", "huber", "edge_weight", "texture_alpha",
+              "noise_reference", "weighted_median_radius"):
+        assert getattr(TVL1_ENERGY, f) == getattr(tv, f), f
+    assert RLRParams(flow_params=TVL1_ENERGY).flow_params.gradient_weight == 140
     q = make_track_params("rlr", flow_method="tvl1-ld", link_weight=1.0)
     assert isinstance(q.flow_params, LargeDisplacementParams) and q.link_weight == 1.0
     assert not q.flow_params.sharpness_match  # a method's defaults, the pair's match off

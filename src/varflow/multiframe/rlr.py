@@ -38,9 +38,12 @@ It is minimised by alternation, after every warp of every pyramid level:
    :func:`prox_faces`).  Or (``data_prox="cd"``) by the dual coordinate descent
    alone (:func:`varflow.ops.prox.prox_linear_l1`), which converges to the same
    point and costs about a fifth per iteration for colour.  ``data_prox="auto"``
-   (default) is exact for grey frames and coordinate descent for colour: for colour
-   both give the same errors (coordinate descent against exact: RubberWhale with
-   τ = 0.02 0.0982 / 0.0983, synthetic suite mean EPE 0.0644 / 0.0646).
+   (default) is exact for a data term of one channel (a grey frame without the
+   gradient term) and coordinate descent otherwise: for colour both give the same
+   errors (coordinate descent against exact: RubberWhale with τ = 0.02 0.0982 /
+   0.0983, synthetic suite mean EPE 0.0644 / 0.0646), and for TV-L1's grey + gradient
+   term (3 channels) too (a 15-frame noisy photographic clip: 0.300 against 0.303,
+   in 0.39 of the time).
 2. **L-step** (``U`` fixed).  ``min_L α ||L||_* + τ ||U − L||_1`` is principal
    component pursuit with ``λ = τ / α``, solved in linear time by l1 filtering
    (:func:`varflow.multiframe.lowrank.lowrank_step`).  ``α`` follows from the
@@ -136,6 +139,7 @@ from ..twoframe.tvl1 import (
     TVL1Params,
     _data_prox_row,
     _dual_row,
+    _gradient_channels,
     _ordered_sum,
     _primal_row,
     _row_blocks,
@@ -155,6 +159,7 @@ from .visibility import VisibilityParams, backward_flows, visibility_from
 FINAL_REPAIR_DISTANCES = (4,)
 
 __all__ = [
+    "TVL1_ENERGY",
     "MultiFrameParams",
     "RLRParams",
     "Coupling",
@@ -172,6 +177,20 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: ``tvl1``'s data term and regulariser as a multi-frame energy (issue 27), opt-in
+#: (``flow_params=TVL1_ENERGY``): the grey channel, λ_D = 15 with gradient constancy
+#: γ = 140, Huber-TV ε_H = 0.02, edge weight c = 30, texture α = 0.3 and the noise rule,
+#: with the plain energy's solver settings (5 warps per level, 50 iterations of the
+#: initial flows), the weighted median on every level and no sharpness match.  rlr on
+#: the photographic tuning split: mean EPE 0.669 against 0.851 with the default (affine
+#: 0.033 / 0.038, nonrigid 0.104 / 0.092, objects 0.659 / 0.724, illumination 2.06 /
+#: 2.94, noise 0.49 / 0.58).  Not the default yet: with it the link τ = 2 drags a small
+#: fast object off its track (the fast-object clip of the tests, far frames 5.2-6.4 px
+#: over L-step seeds against 0.12 px decoupled; 1.2-1.9 px at τ = 0.3), so the link's
+#: strength has to follow how well the motion fits the low-rank model first.
+TVL1_ENERGY = TVL1Params(max_iterations=50, n_warps=5, weighted_median_levels=0,
+                         sharpness_match=False)
 
 
 @dataclass(frozen=True)
@@ -214,8 +233,8 @@ class MultiFrameParams(FlowTrackParams):
         proposes the active set, an optimality certificate accepts it, else face
         enumeration; :func:`prox_certified`), dual coordinate descent alone
         (``data_sweeps`` sweeps per iteration, warm started), or "auto" = exact for
-        grey frames, coordinate descent for colour (the same errors, the U-step
-        about 5x faster for colour).
+        a one-channel data term (grey frames, no gradient term), coordinate descent
+        for more channels (the same errors, the U-step about 5x faster for colour).
     init : {"propagate", "twoframe", "zero"}
         Initial trajectories: propagated outward from the reference and refined
         against it frame by frame
@@ -314,7 +333,8 @@ class MultiFrameParams(FlowTrackParams):
     @classmethod
     def default_energy(cls) -> TVL1Params:
         """The two-frame parameters when ``flow_params`` is not given: the book's plain
-        energy (:class:`~varflow.twoframe.tvl1.PlainTVL1Params`)."""
+        energy (:class:`~varflow.twoframe.tvl1.PlainTVL1Params`; ``tvl1``'s is
+        :data:`TVL1_ENERGY`)."""
         return PlainTVL1Params()
 
     def __post_init__(self) -> None:
@@ -460,7 +480,13 @@ class RLRParams(MultiFrameParams):
     warp in the initial two-frame flows and in the multi-frame refinement (every
     frame's displacement, guided by the reference frame): RubberWhale frame-11 AEE
     0.0952 against 0.0987 without; the two-frame ``tvl1`` flow 0.0970.
+    ``flow_params=TVL1_ENERGY`` gives ``tvl1``'s data term and regulariser.
     """
+
+    @classmethod
+    def default_energy(cls) -> TVL1Params:
+        """The plain energy with the weighted median (see the class notes)."""
+        return PlainTVL1Params(weighted_median_radius=3)
 
     link_weight: float = 2.0
     adjacent_link_factor: float = 0.01
@@ -477,11 +503,6 @@ class RLRParams(MultiFrameParams):
     lowrank_strata: int = 8
     level_basis: bool = True
     lowrank_tolerance: float = 1e-4
-
-    @classmethod
-    def default_energy(cls) -> TVL1Params:
-        """The plain energy with the weighted median (see the class notes)."""
-        return PlainTVL1Params(weighted_median_radius=3)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -1326,7 +1347,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     l1 = coupling.kind == "l1" and (weight > 0 or (visible is not None and w_hidden > 0))
     beta = np.float32(weight if coupling.kind == "l2" else 0.0)
     n_work = pyrs[ref][0].shape[2]  # the channels the energy works on (1 with grey)
-    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_work == 1)
+    n_data = n_work + 2 * _gradient_channels(energy, n_work)  # channels of the data term
+    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_data == 1)
     huber = np.float32(energy.huber)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
     t_u = 0.0
