@@ -352,3 +352,25 @@ def test_rlr_is_registered_and_reachable_from_the_api(small_seq):
     traj = varflow.track(s.frames[:4], 1, "rlr", n_warps=1, max_iterations=5)
     assert traj.shape == (4,) + s.frames.shape[1:3] + (2,) and np.all(traj[1] == 0)
     assert np.all(np.isfinite(traj))
+
+
+def test_a_brightness_ramp_is_tracked_as_well_as_by_tvl1_on_its_pairs():
+    """Issue 27: with tvl1's energy (gradient constancy) the U-step is blind to a gain and
+    offset drift, as tvl1 is.  Measured (2026-12-02): rlr with TVL1_ENERGY 0.0604 px,
+    twoframe (tvl1 from the reference to every frame) 0.0706; rlr on the default plain
+    energy 0.325 and twoframe on it 0.512 (the colour term follows the brightness)."""
+    from varflow.multiframe.rlr import TVL1_ENERGY
+
+    s = make_sequence("affine", n_frames=9, shape=(64, 80), magnitude=3.0, seed=5)
+    frames = s.frames.copy()
+    for n in range(frames.shape[0]):
+        d = n - s.ref
+        frames[n] = np.clip(frames[n] * (1 + 0.04 * d) + 0.03 * d, 0, 1)
+
+    def epe(traj):
+        return trajectory_errors(traj, s.trajectories, s.visibility, ref=s.ref)["epe"]
+
+    e_rlr = epe(varflow.track(frames, s.ref, "rlr", flow_params=TVL1_ENERGY))
+    e_two = epe(varflow.track(frames, s.ref, "twoframe"))
+    assert e_rlr < 1.0 * e_two, (e_rlr, e_two)
+    assert e_rlr < 0.1, e_rlr
