@@ -12,6 +12,7 @@ from varflow.multiframe.rlr import (
     Coupling,
     RLRParams,
     adjacent_factor,
+    fit_gate,
     link_channels,
     prox_certified,
     prox_faces,
@@ -374,3 +375,33 @@ def test_a_brightness_ramp_is_tracked_as_well_as_by_tvl1_on_its_pairs():
     e_two = epe(varflow.track(frames, s.ref, "twoframe"))
     assert e_rlr < 1.0 * e_two, (e_rlr, e_two)
     assert e_rlr < 0.1, e_rlr
+
+
+def test_fit_gate_keeps_the_link_where_the_motion_is_low_rank():
+    rng = np.random.default_rng(0)
+    f, h, w, ref = 5, 40, 48, 2
+    target = np.zeros((f, h, w, 2), np.float32)
+    for n in range(f):
+        target[n, ..., 0] = 0.5 * (n - ref)  # a translation: rank 1
+    traj = target + rng.normal(0, 0.05, target.shape).astype(np.float32)  # estimation noise
+    traj[:, 10:20, 10:20, 1] += np.float32(1.5) * (np.arange(f) - ref)[:, None, None]  # misfit
+    traj[ref] = 0
+    g = fit_gate(traj, target, ref, None, k=2.0)
+    assert g.shape == (h, w) and g.dtype == np.float32
+    assert np.all((g > 0) & (g <= 1))
+    assert g[30:, 30:].min() > 0.75  # fits as well as the clip: the link stays
+    assert g[13:17, 13:17].max() < 0.05  # the object the model does not hold: decoupled
+    # hidden entries do not count towards the misfit
+    vis = np.ones((f, h, w), bool)
+    vis[:, 10:20, 10:20] = False
+    vis[ref] = True
+    assert fit_gate(traj, target, ref, vis, k=2.0)[13:17, 13:17].min() > 0.75
+
+
+def test_a_gate_of_one_is_the_ungated_link(small_seq):
+    s = small_seq
+    frames = check_frames(s.frames)
+    params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20)
+    a = track_rlr(frames, s.ref, params)
+    b = track_rlr(frames, s.ref, params.replace(link_gate=1e9))  # every factor is 1.0
+    np.testing.assert_array_equal(a, b)

@@ -120,7 +120,7 @@ from ..ops.prox import (
     prox_linear_l1,
     prox_linear_l1_exact,
 )
-from ..ops.pyramid import resize_bilinear, resize_flow
+from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import (
     _check,
@@ -168,6 +168,7 @@ __all__ = [
     "track_rlr",
     "adjacent_factor",
     "clip_noise_rule",
+    "fit_gate",
     "ustep_iterations",
     "ustep_iterations_numpy",
     "prox_faces",
@@ -249,7 +250,7 @@ class MultiFrameParams(FlowTrackParams):
     ustep_tolerance : float
         Stop a U-step early when the RMS change of a frame's displacement per
         primal-dual iteration is below this many pixels; 0 runs
-        ``max_iterations`` iterations.  The primal-dual steps are small, so the
+        ``ustep_iterations`` iterations.  The primal-dual steps are small, so the
         TV-L1 ``tolerance`` (which serves the initialisation) would stop it after a
         few iterations.  Default 0.
     propagate_levels : int
@@ -474,6 +475,13 @@ class RLRParams(MultiFrameParams):
         target for the next U-step, not a result: 1e-4 differs from 1e-7 by
         2.5e-4 px on average and takes 0.6× the iterations.  Default 1e-4.
 
+    link_gate : float
+        k of the link's fit gate (:func:`fit_gate`): the link weight of the visible
+        entries of a region is scaled by ``1 / (1 + (r / (k m))²)``, ``r`` the
+        region's misfit to the low-rank target and ``m`` the clip's median misfit,
+        so that where the motion is not low rank the refinement is decoupled; 0
+        turns the gate off.  Default 0 (being measured, issue 27).
+
     The default energy (:meth:`default_energy`) is the book's plain one with the
     weighted median (``weighted_median_radius`` 3, as ``tvl1`` but on every level,
     ``weighted_median_levels`` 0, with the colour guide), after each level's last
@@ -503,6 +511,7 @@ class RLRParams(MultiFrameParams):
     lowrank_strata: int = 8
     level_basis: bool = True
     lowrank_tolerance: float = 1e-4
+    link_gate: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -526,6 +535,7 @@ class RLRParams(MultiFrameParams):
                f"must be >= 0, got {self.lowrank_strata}")
         _check(0 < self.lowrank_tolerance < 1, "lowrank_tolerance",
                f"must be in (0, 1), got {self.lowrank_tolerance}")
+        _check(self.link_gate >= 0, "link_gate", f"must be >= 0, got {self.link_gate}")
         _check(
             self.lowrank_samples >= 0,
             "lowrank_samples",
@@ -1146,6 +1156,51 @@ class Coupling:
     seconds: float = 0.0
     hidden_weight: float | None = None
     adjacent_factor: float = 1.0
+    gate: Any = None
+
+
+def fit_gate(traj: np.ndarray, target: np.ndarray, ref: int, visible: np.ndarray | None,
+             k: float, sigma: float = 2.0, floor: float = 0.05) -> np.ndarray:
+    """Per-pixel factor of the link weight from how well the motion fits the low-rank model.
+
+    ``r(x)``: the mean over the visible frames ``n ≠ ref`` of
+    ``|u_n(x) − l_n(x)| / |n − ref|`` (the misfit of the trajectory to its low-rank
+    target, in pixels per frame), smoothed by a Gaussian of ``sigma`` pixels so that
+    it describes a region, not a pixel; ``m`` its median over the frame.  The factor
+    is ``1 / (1 + (r / (k m + floor))²)``: about 1 where a region fits the model as
+    well as the clip does (rigid motion; uniformly noisy frames, whose misfit is the
+    noise everywhere), and → 0 where it fits much worse (an object whose motion the
+    basis does not hold: the refinement there is decoupled).
+
+    Parameters
+    ----------
+    traj, target : ndarray, shape (F, h, w, 2)
+    ref : int
+    visible : ndarray, shape (F, h, w), bool, or None
+    k : float
+        Misfit, in medians, at which the link is halved.
+    sigma, floor : float
+        Smoothing (pixels) and the misfit floor (pixels per frame) below which a fit
+        counts as exact.
+
+    Returns
+    -------
+    ndarray, shape (h, w), float32, in (0, 1]
+    """
+    f = traj.shape[0]
+    num = np.zeros(traj.shape[1:3], np.float64)
+    den = np.zeros(traj.shape[1:3], np.float64)
+    for n in range(f):
+        if n == ref:
+            continue
+        e = np.hypot(*(traj[n] - target[n]).transpose(2, 0, 1)) / abs(n - ref)
+        wgt = np.ones_like(e) if visible is None else visible[n].astype(np.float64)
+        num += wgt * e
+        den += wgt
+    r = np.where(den > 0, num / np.maximum(den, 1), 0.0).astype(np.float32)
+    r = smooth_image(r[..., None], sigma)[..., 0]
+    scale = k * float(np.median(r)) + floor
+    return (1.0 / (1.0 + (r / np.float32(scale)) ** 2)).astype(np.float32)
 
 
 def _link_ratio(weight: float, params: MultiFrameParams, g: np.ndarray,
@@ -1386,6 +1441,9 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
             for _a in range(params.alternations):
                 t0 = time.perf_counter()
                 target = coupling.target(traj, vis_l) if (weight > 0 or l1) else None
+                gate = None
+                if l1 and target is not None and coupling.gate is not None:
+                    gate = coupling.gate(traj, target, vis_l)
                 t1 = time.perf_counter()
                 coupling.seconds += t1 - t0
                 for n in others:  # U-step with the target fixed, frame by frame
@@ -1393,7 +1451,9 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                     vis_n = None if vis_l is None else vis_l[n]
                     adjacent = abs(n - ref) == 1
                     rn = adj_map if adjacent else ratio_map
-                    if l1 and vis_n is not None and w_hidden != weight:
+                    if gate is not None:  # the visible entries' link follows the fit
+                        rn = (rn * gate).astype(np.float32)
+                    if l1 and vis_n is not None and (w_hidden != weight or gate is not None):
                         rn = np.where(vis_n, rn, r_hid_adj if adjacent else r_hid)
                         rn = rn.astype(np.float32)
                     ix, iy, a = _linearised_frame(i0, pyrs[n][level], start[n], vis_n,
@@ -1517,9 +1577,14 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         out[ref] = 0.0
         return out
 
+    gate = None
+    if params.link_gate > 0:
+        def gate(traj: np.ndarray, target: np.ndarray, visible: np.ndarray | None) -> np.ndarray:
+            return fit_gate(traj, target, ref, visible, params.link_gate)
+
     coupling = Coupling("l1", tau, lstep, edge_scaled=params.link_edge,
                         hidden_weight=float(params.hidden_link_weight),
-                        adjacent_factor=adjacent_factor(frames, ref, params))
+                        adjacent_factor=adjacent_factor(frames, ref, params), gate=gate)
     traj = refine_trajectories(frames, ref, params, coupling, callback, engine, stats)
     stats.update(lstep_seconds=coupling.seconds, ranks=ranks)
     return traj
