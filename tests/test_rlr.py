@@ -213,8 +213,9 @@ def test_rlr_beats_independent_two_frame_flows_on_a_noisy_sequence():
     # measured (2026-11-23): twoframe on the plain energy 0.136, rlr 0.072 px mean EPE;
     # 2026-12-01, against the library's own flow (issue 27): twoframe with tvl1 (the
     # default of varflow.flow) 0.1127, with tvl1-ld 0.1124, on the plain energy
-    # 0.1357; rlr 0.0766 (ratio 0.68), rlr with link_weight=0 0.142; with tvl1's energy
-    # (flow_params=TVL1_ENERGY) rlr 0.0896 (ratio 0.795 to both)
+    # 0.1357; rlr on the plain energy 0.0766 (ratio 0.68), with link_weight=0 0.142; on
+    # tvl1's energy (the default since issue 27, with the fit gate) rlr 0.0897 (ratio
+    # 0.796 to both: the plain energy's three colour residuals average this noise better)
     s = make_sequence("affine", n_frames=12, shape=(64, 80), magnitude=4.0, seed=4,
                       variant="gaussian")
     rlr = varflow.track(s.frames, s.ref, "rlr")
@@ -222,7 +223,7 @@ def test_rlr_beats_independent_two_frame_flows_on_a_noisy_sequence():
     for kw in ({}, {"flow_method": "tvl1-ld"}):
         two = varflow.track(s.frames, s.ref, "twoframe", **kw)
         e_two = trajectory_errors(two, s.trajectories, s.visibility, ref=s.ref)["epe"]
-        assert e_rlr < 0.75 * e_two, (kw, e_rlr, e_two)
+        assert e_rlr < 0.88 * e_two, (kw, e_rlr, e_two)
 
 
 def test_exact_and_linear_lowrank_steps_find_the_same_rank(small_seq):
@@ -331,7 +332,7 @@ def test_the_energy_is_composed():
     from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
     p = RLRParams()
-    assert p.flow_method == "tvl1" and p.flow_params == PlainTVL1Params(weighted_median_radius=3)
+    assert p.flow_method == "tvl1" and p.flow_params == TVL1_ENERGY
     # tvl1's data term and regulariser, the plain energy's solver settings
     tv = TVL1Params()
     for f in ("grey", "data_weight", "gradient_weight", "huber", "edge_weight", "texture_alpha",
@@ -402,6 +403,6 @@ def test_a_gate_of_one_is_the_ungated_link(small_seq):
     s = small_seq
     frames = check_frames(s.frames)
     params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20)
-    a = track_rlr(frames, s.ref, params)
+    a = track_rlr(frames, s.ref, params.replace(link_gate=0.0))
     b = track_rlr(frames, s.ref, params.replace(link_gate=1e9))  # every factor is 1.0
     np.testing.assert_array_equal(a, b)
