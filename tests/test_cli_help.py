@@ -123,12 +123,13 @@ def test_every_track_flag_states_the_tracker_default(method: str) -> None:
 
 
 def test_track_and_batch_help_without_method(capsys: pytest.CaptureFixture[str]) -> None:
-    # twoframe and chain take the default two-frame method's (tvl1's) defaults
+    # twoframe and chain take the default two-frame method's (tvl1's) defaults, rlr and
+    # mfsf their TVL1_ENERGY (5 warps, the weighted median on every level)
     text = help_text(capsys, "track")
-    assert "(default 3; mfsf: 0)" in flag_help(text, "--weighted-median-radius")
+    assert "(default 0; twoframe, chain: 3)" in flag_help(text, "--weighted-median-levels")
     assert "(default 5; twoframe, chain: 4)" in flag_help(text, "--n-warps")
     text = help_text(capsys, "batch", "track")
-    assert "(default 3; mfsf: 0)" in flag_help(text, "--weighted-median-radius")
+    assert "(default 0; twoframe, chain: 3)" in flag_help(text, "--weighted-median-levels")
     text = help_text(capsys, "batch", "flow")
     assert "(default 4; tvl1-*: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
     text = help_text(capsys, "batch", "flow", "--method", "tvl1-ld")
@@ -141,7 +142,9 @@ def test_bench_help_with_methods(capsys: pytest.CaptureFixture[str]) -> None:
     text = help_text(capsys, "bench", "middlebury", "--methods", "tensor")
     assert flag_help(text, "--n-warps").endswith("(default 5)")
     text = help_text(capsys, "bench", "trajectories", "--methods", "mfsf")
-    assert flag_help(text, "--weighted-median-radius").endswith("(default 0)")
+    assert "--link-weight" not in text  # rlr's, hidden for mfsf
+    assert flag_help(text, "--subspace-weight").endswith("(default 10.0)")
+    assert flag_help(text, "--n-warps").endswith("(default 5)")
 
 
 def test_methods_params_table_unchanged(capsys: pytest.CaptureFixture[str]) -> None:
