@@ -472,19 +472,19 @@ def test_rlr_defaults_on_rubberwhale(data_root: Path) -> None:
     """RubberWhale frame 11, full resolution and full iterations, default parameters.
 
     Measured (2026-12-01, benchmarks/README.md): the TV-L1 pair 0.0970 with both the
-    host build and NUMBA_CPU_NAME=generic; RLR 0.0959 / 0.0951.  The builds move RLR
-    by 0.0008, almost as much as its lead over the pair (0.0011-0.0019), so "RLR
-    beats the pair" is a benchmark figure (``varflow bench sintel-trajectories``),
-    not a test: this test bounds RLR within 3 % of the pair, which the full link on
-    the frames next to the reference breaks
-    (0.1305 at ``adjacent_link_factor=1``, 2026-11-30).
+    host build and NUMBA_CPU_NAME=generic; RLR 0.0959 / 0.0951 on the plain energy.
+    The builds move RLR by 0.0008.  Since issue 27 RLR's default energy is tvl1's
+    (TVL1_ENERGY, with the fit gate): 0.0998 on the host build (2026-12-02), 2.9 %
+    above the pair, so "RLR beats the pair" is not met on this clip; this test bounds
+    RLR within 6 % of the pair, which the full link on the frames next to the
+    reference breaks (0.1305 at ``adjacent_link_factor=1``, 2026-11-30).
     """
     rows = bm.run_middlebury_multiframe(["rlr"], {}, progress=False, root=data_root,
                                         warm_up=False)
     rlr = next(r for r in rows if r["method"] == "rlr")
     pair = next(r for r in rows if r["method"] == bm.BASELINE_LABEL)
     assert 0.093 < pair["aee"] < 0.103, pair
-    assert rlr["aee"] < 1.03 * pair["aee"], (rlr["aee"], pair["aee"])
+    assert rlr["aee"] < 1.06 * pair["aee"], (rlr["aee"], pair["aee"])
 
 
 def test_cli_sintel_trajectories(capsys: pytest.CaptureFixture[str], alley_root: Path,
