@@ -135,11 +135,6 @@ def make_track_params(method: str | Tracker, params: Any = None, **overrides: An
     return base.replace(**overrides) if overrides else base
 
 
-def track_fields(params_class: type) -> tuple[str, ...]:
-    """The names of a tracker parameter class's own fields."""
-    return tuple(f.name for f in dataclasses.fields(params_class))
-
-
 def parameter_fields(entry: Method | Tracker, flow_method: str | None = None
                      ) -> list[tuple[str, Any, type]]:
     """``(name, default, class documenting it)`` of every parameter an entry accepts.

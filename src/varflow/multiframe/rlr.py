@@ -1394,8 +1394,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     l1 = coupling.kind == "l1" and (weight > 0 or (visible is not None and w_hidden > 0))
     beta = np.float32(weight if coupling.kind == "l2" else 0.0)
     n_work = pyrs[ref][0].shape[2]  # the channels the energy works on (1 with grey)
-    n_data = n_work + 2 * _gradient_channels(energy, n_work)  # channels of the data term
-    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_data == 1)
+    n_terms = n_work + 2 * _gradient_channels(energy, n_work)  # channels of the data term
+    exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_terms == 1)
     huber = np.float32(energy.huber)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
     t_u = 0.0
