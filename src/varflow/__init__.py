@@ -38,7 +38,7 @@ import numpy as np
 from ._version import __version__
 from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
 from .twoframe.coarse_to_fine import ProgressCallback
-from .twoframe.methods import run_method
+from .twoframe.methods import DEFAULT_METHOD, run_method
 
 __all__ = [
     "__version__",
@@ -164,7 +164,7 @@ def track(
 def flow(
     frame0: np.ndarray,
     frame1: np.ndarray,
-    method: str = "tvl1",
+    method: str = DEFAULT_METHOD,
     *,
     params: Any = None,
     init_flow: np.ndarray | None = None,

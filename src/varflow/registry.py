@@ -129,9 +129,6 @@ def make_track_params(method: str | Tracker, params: Any = None, **overrides: An
     base = params if params is not None else m.params()
     if not isinstance(base, m.params):
         raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
-    if "flow_method" in overrides and params is None:  # that method's defaults, not tvl1's
-        base = m.params(flow_method=overrides["flow_method"],
-                        flow_params=overrides.get("flow_params"))
     return base.replace(**overrides) if overrides else base
 
 
@@ -153,7 +150,7 @@ def parameter_fields(entry: Method | Tracker, flow_method: str | None = None
             if flow_method not in METHODS:
                 raise ValueError(f"flow_method: unknown two-frame method {flow_method!r}; "
                                  f"available: {', '.join(sorted(METHODS))}")
-            inner = METHODS[flow_method].params()
+            inner = entry.params.default_flow_params(flow_method)
         own = {name for name, _, _ in out}
         out += [(f.name, getattr(inner, f.name), type(inner))
                 for f in dataclasses.fields(inner) if f.name not in own]

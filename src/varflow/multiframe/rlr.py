@@ -123,6 +123,7 @@ from ..ops.prox import (
 from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import (
+    CoarseToFineParams,
     _check,
     coarse_to_fine_pyramids,
     filter_flow,
@@ -211,9 +212,8 @@ class MultiFrameParams(FlowTrackParams):
     :func:`varflow.track` and the CLI) routes a field of the energy to
     ``flow_params``.  The method must be TV-L1's (``tvl1``, ``tvl1-fast``,
     ``tvl1-ld``: the U-step has its data term and isotropic TV); its
-    ``sharpness_match`` matches two frames and must be off (a method named without
-    ``flow_params`` takes its defaults with it off).  The energy of ``tvl1`` named
-    without ``flow_params`` is :meth:`default_energy`.
+    ``sharpness_match`` matches two frames and must be off.  A method named without
+    ``flow_params`` takes :meth:`default_flow_params`.
 
     Attributes
     ----------
@@ -331,21 +331,18 @@ class MultiFrameParams(FlowTrackParams):
     hidden_data_weight: float = 0.0
 
     @classmethod
-    def default_energy(cls) -> TVL1Params:
-        """The two-frame parameters when ``flow_params`` is not given:
-        :data:`TVL1_ENERGY`, ``tvl1``'s data term and regulariser."""
-        return TVL1_ENERGY
+    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
+        """The energy of a ``flow_method`` named without ``flow_params``:
+        :data:`TVL1_ENERGY` for ``tvl1`` (its data term and regulariser), another
+        method's defaults with the sharpness match off (it matches two frames)."""
+        if flow_method == DEFAULT_METHOD:
+            return TVL1_ENERGY
+        defaults = super().default_flow_params(flow_method)
+        if getattr(defaults, "sharpness_match", False):
+            defaults = replace(defaults, sharpness_match=False)
+        return defaults
 
     def __post_init__(self) -> None:
-        if self.flow_params is None:
-            method = METHODS.get(self.flow_method) if isinstance(self.flow_method, str) else None
-            if self.flow_method == DEFAULT_METHOD:
-                object.__setattr__(self, "flow_params", type(self).default_energy())
-            elif method is not None:  # that method's defaults, without the pair's match
-                defaults = method.params()
-                if getattr(defaults, "sharpness_match", False):
-                    defaults = replace(defaults, sharpness_match=False)
-                object.__setattr__(self, "flow_params", defaults)
         super().__post_init__()
         _check(METHODS[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
                f"the multi-frame U-step has TV-L1's energy (isotropic TV); "
@@ -483,7 +480,7 @@ class RLRParams(MultiFrameParams):
         tests, far frames 0.11-0.28 px against 5.2-6.7 without; tuning split with
         :data:`TVL1_ENERGY` 0.665 against 0.669 without).
 
-    The default energy is :data:`TVL1_ENERGY` (:meth:`MultiFrameParams.default_energy`);
+    The default energy is :data:`TVL1_ENERGY` (:meth:`MultiFrameParams.default_flow_params`);
     ``flow_params=PlainTVL1Params(weighted_median_radius=3)`` is the book's plain
     energy with the weighted median, RLR's default before issue 27.
     """

@@ -71,11 +71,17 @@ class FlowTrackParams:
         Default ``"tvl1"``, the default of :func:`varflow.flow`.
     flow_params : CoarseToFineParams or None
         Its parameter object, an instance of the method's parameter class; None
-        (default) gives the method's defaults.
+        (default) gives :meth:`default_flow_params`, the method's defaults.
     """
 
     flow_method: str = DEFAULT_METHOD
     flow_params: CoarseToFineParams | None = None
+
+    @classmethod
+    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
+        """The ``flow_params`` of a registered ``flow_method`` named without them: the
+        method's defaults (a tracker class may choose others)."""
+        return METHODS[flow_method].params()
 
     def __post_init__(self) -> None:
         method = METHODS.get(self.flow_method) if isinstance(self.flow_method, str) else None
@@ -83,7 +89,8 @@ class FlowTrackParams:
                f"unknown two-frame method {self.flow_method!r}; available: "
                f"{', '.join(sorted(METHODS))}")
         if self.flow_params is None:
-            object.__setattr__(self, "flow_params", method.params())
+            object.__setattr__(self, "flow_params", type(self).default_flow_params(
+                self.flow_method))
         _check(isinstance(self.flow_params, method.params), "flow_params",
                f"expected {method.params.__name__} for method {self.flow_method!r}, got "
                f"{type(self.flow_params).__name__}")
