@@ -112,8 +112,9 @@ _BAD = {
     "sparse_min_size": 5, "nesterov_iterations": 0, "nesterov_stages": 0,
     "smoothing_tv": 0.0, "smoothing_data": 0.0, "combined_solver": "admm", "combined_coupling": 0.0,
     "combined_iterations": 0, "combined_tolerance": -1.0,
-    # tvl1's robust data-term and Huber-TV fields: the sparse stage has plain TV-L1
-    "gradient_weight": 40.0, "data_normalisation": 0.05, "huber": 0.02,
+    # tvl1's robust data-term and Huber-TV fields (the sparse stage handles them since
+    # issue 27, part 6; checked by TVL1Params)
+    "gradient_weight": -1.0, "data_normalisation": -0.05, "huber": -0.02,
 }
 
 

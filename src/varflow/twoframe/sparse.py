@@ -37,6 +37,16 @@ Bootstrap, at each pyramid level whose smaller side is at least ``sparse_min_siz
 
 The 5×5 median filter of the driver follows every warp, as in the book.
 
+The energy's data term and TV are those of the parameter class: the book's plain
+energy (:class:`SparseParams`, the ``sparse-*`` methods) or ``tvl1``'s
+(:class:`TVL1SparseParams`, ``tvl1-sparse-*``: the "more sophisticated variational
+approach" the book says the sparse term could be added to).  The sparse warps use
+every channel of :func:`~varflow.twoframe.tvl1.data_channels` (the gradient-constancy
+channels too) and the Huber-TV of ε_H = ``huber``: exactly in the primal-dual step; in
+Nesterov's method, Huber-TV smoothed with μ_TV is the Huber function of ε_H + μ_TV.
+The driver applies the noise rule, the sharpness match, the grey channel and the
+weighted median (after the last, sparse, warp of a level) for both.
+
 Symbol map: λ = ``data_weight``, λ_TV = ``sparse_tv_weight``, λ_SP =
 ``sparse_weight`` (times ``sparse_weight_decay`` per coarser level), μ =
 ``omp_tolerance``, μ_TV = ``smoothing_tv``, μ_data = ``smoothing_data``, k =
@@ -55,7 +65,7 @@ import numba as nb
 import numpy as np
 
 from ..ops.differences import divergence, gradient
-from ..ops.prox import project_l2_ball
+from ..ops.prox import prox_huber_conjugate
 from ..sparse import (
     PatchGrid,
     check_layout,
@@ -67,28 +77,36 @@ from ..sparse import (
     split_problems,
 )
 from .coarse_to_fine import _check
-from .tensor import TensorParams, init_tensor_level
+from .tensor import FULL_ENERGY_TENSOR_A, TensorFields, init_tensor_level
 from .tvl1 import (
     _EPS_GRAD,
+    PlainTVL1Params,
+    TVL1Params,
     _dual_row,
     _ordered_sum,
     _primal_row,
     _row_blocks,
+    data_channels,
+    data_duals,
     edge_weight,
     init_level_state,
     kernel_tensor,
-    linearise,
     planar,
-    require_plain_tvl1,
     run_warp,
 )
 
 __all__ = [
+    "SparseFields",
     "SparseParams",
     "SparseDCTParams",
     "Sparse1DParams",
     "Sparse2x1DParams",
     "Sparse2DParams",
+    "TVL1SparseParams",
+    "TVL1SparseDCTParams",
+    "TVL1Sparse1DParams",
+    "TVL1Sparse2x1DParams",
+    "TVL1Sparse2DParams",
     "solve_warp",
     "sparse_approximation",
     "learn_dictionaries",
@@ -106,13 +124,17 @@ _F1 = np.float32(1.0)
 
 
 @dataclass(frozen=True)
-class SparseParams(TensorParams):
-    """Parameters of sparse-regularised TV-L1 (all TV-L1 and tensor fields too).
+class SparseFields(TensorFields):
+    """The fields of the sparse term (and of the tensor regulariser), to compose onto a
+    TV-L1 energy.
+
+    A mixin, like :class:`~varflow.twoframe.tensor.TensorFields`: put it before a
+    :class:`~varflow.twoframe.tvl1.TVL1Params` subclass in the bases; its checks run
+    after those of the energy.  :class:`SparseParams` composes it with the book's
+    plain energy, :class:`TVL1SparseParams` with ``tvl1``'s.
 
     Attributes
     ----------
-    edge_weight : float
-        c of the TV edge weight g(x) = exp(-c |∇I0|²), as in TV-L1.  Default 50.
     regulariser : str
         "tv" (isotropic, edge-weighted TV) or "tensor" (tensor-directed TV, fields
         ``tensor_*``).  Default "tv".
@@ -167,7 +189,9 @@ class SparseParams(TensorParams):
         coarser smoothing would first blur (RubberWhale, λ_SP = 0, 90 iterations:
         AEE 0.1168 with 3 stages, 0.0987 with 1, TV-L1 itself 0.0994).
     smoothing_tv : float
-        μ_TV, Huber smoothing of the TV term (pixels/pixel).  Default 0.01.
+        μ_TV, Huber smoothing of the TV term (pixels/pixel); with Huber-TV (ε_H =
+        ``huber`` > 0) Nesterov's method minimises the Huber function of ε_H + μ_TV.
+        Default 0.01.
     smoothing_data : float
         μ_data, Huber smoothing of the L1 data term (intensity).  Default 0.01.
     seed : int
@@ -195,7 +219,6 @@ class SparseParams(TensorParams):
         iterations stop after 2-6 iterations, before the pull towards ``ū`` acts).
     """
 
-    edge_weight: float = 50.0
     regulariser: str = "tv"
     dictionary: str = "mod"
     layout: str = "1D"
@@ -223,8 +246,7 @@ class SparseParams(TensorParams):
     combined_tolerance: float = 0.0
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        require_plain_tvl1(self, "the sparse stage")  # not in the sparse stage yet
+        super().__post_init__()  # the energy's and the tensor's checks
         _check(self.regulariser in ("tv", "tensor"), "regulariser",
                f"must be 'tv' or 'tensor', got {self.regulariser!r}")
         _check(self.dictionary in ("mod", "dct"), "dictionary",
@@ -287,6 +309,22 @@ class SparseParams(TensorParams):
 
 
 @dataclass(frozen=True)
+class SparseParams(SparseFields, PlainTVL1Params):
+    """Parameters of sparse-regularised TV-L1 on the book's plain energy (``sparse-*``).
+
+    The fields of :class:`~varflow.twoframe.tvl1.PlainTVL1Params` and of
+    :class:`SparseFields` (the tensor fields included).
+
+    Attributes
+    ----------
+    edge_weight : float
+        c of the TV edge weight g(x) = exp(-c |∇I0|²), as in TV-L1.  Default 50.
+    """
+
+    edge_weight: float = 50.0
+
+
+@dataclass(frozen=True)
 class SparseDCTParams(SparseParams):
     """Sparse TV-L1 with the fixed overcomplete DCT (``dictionary="dct"``)."""
 
@@ -315,6 +353,58 @@ class Sparse2DParams(SparseParams):
     n_atoms: int = 400
 
 
+@dataclass(frozen=True)
+class TVL1SparseParams(SparseFields, TVL1Params):
+    """Sparse-regularised TV-L1 on ``tvl1``'s energy (``tvl1-sparse-*``).
+
+    The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` (grey channel,
+    gradient constancy, Huber-TV, noise rule, weighted median, sharpness match, with
+    their defaults) and of :class:`SparseFields`.  The sparse warps minimise the same
+    data term (the colour and the gradient-constancy channels) and the Huber-TV
+    (smoothed with μ_TV: the Huber function of ε_H + μ_TV for Nesterov's method,
+    exact for the primal-dual scheme); the weighted median follows the last sparse
+    warp of a level.  With ``sparse_weight = 0`` and the primal-dual solver the
+    sparse warps are more ``tvl1`` warps.
+
+    Attributes
+    ----------
+    tensor_a : float
+        a of g(s) = exp(-a s^b) of the tensor-directed TV (``regulariser="tensor"``),
+        as ``tvl1-tensor``'s (:class:`~varflow.twoframe.tensor.TVL1TensorParams`,
+        tuned on the photographic tuning split).  Default 0.5.
+    """
+
+    tensor_a: float = FULL_ENERGY_TENSOR_A
+
+
+@dataclass(frozen=True)
+class TVL1SparseDCTParams(TVL1SparseParams):
+    """Sparse TV-L1 on ``tvl1``'s energy, fixed overcomplete DCT (``dictionary="dct"``)."""
+
+    dictionary: str = "dct"
+
+
+@dataclass(frozen=True)
+class TVL1Sparse1DParams(TVL1SparseParams):
+    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "1D" dictionary."""
+
+    layout: str = "1D"
+
+
+@dataclass(frozen=True)
+class TVL1Sparse2x1DParams(TVL1SparseParams):
+    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "2x1D" dictionaries."""
+
+    layout: str = "2x1D"
+
+
+@dataclass(frozen=True)
+class TVL1Sparse2DParams(TVL1SparseParams):
+    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "2D" dictionary."""
+
+    layout: str = "2D"
+
+
 # --------------------------------------------------------------------- dictionaries
 
 
@@ -326,7 +416,7 @@ def _dct(layout: str, patch_size: int, n_atoms: int) -> tuple[np.ndarray, ...]:
     return tuple(dicts)
 
 
-def _grid(shape: tuple[int, int], params: SparseParams) -> PatchGrid:
+def _grid(shape: tuple[int, int], params: SparseFields) -> PatchGrid:
     return PatchGrid(shape[0], shape[1], (params.patch_size, params.patch_size),
                      params.patch_offset)
 
@@ -338,14 +428,14 @@ def _problems(flow: np.ndarray, grid: PatchGrid, layout: str):
 
 
 def learn_dictionaries(
-    flow: np.ndarray, params: SparseParams, init: list[np.ndarray] | None = None
+    flow: np.ndarray, params: SparseFields, init: list[np.ndarray] | None = None
 ) -> list[np.ndarray]:
     """Learn (or refresh) the dictionaries of ``params.layout`` from a flow by MOD.
 
     Parameters
     ----------
     flow : ndarray, shape (H, W, 2), float32
-    params : SparseParams
+    params : SparseFields
     init : list of ndarray, optional
         Starting dictionaries (the coarser level's); the overcomplete DCT if absent.
 
@@ -374,7 +464,7 @@ def learn_dictionaries(
 
 
 def sparse_approximation(
-    flow: np.ndarray, dictionaries: list[np.ndarray], params: SparseParams
+    flow: np.ndarray, dictionaries: list[np.ndarray], params: SparseFields
 ) -> np.ndarray:
     """``ū``: the average of the overlapping OMP approximations of the flow's patches.
 
@@ -383,7 +473,7 @@ def sparse_approximation(
     flow : ndarray, shape (H, W, 2), float32
     dictionaries : list of ndarray
         As returned by :func:`learn_dictionaries` (or the DCT of the layout).
-    params : SparseParams
+    params : SparseFields
 
     Returns
     -------
@@ -399,7 +489,7 @@ def sparse_approximation(
     return np.ascontiguousarray(approx, dtype=np.float32)
 
 
-def coverage_weight(shape: tuple[int, int], params: SparseParams) -> np.ndarray:
+def coverage_weight(shape: tuple[int, int], params: SparseFields) -> np.ndarray:
     """Patch coverage ``c(x)`` normalised by its mean ``m n / k²``, shape (H, W)."""
     grid = _grid(shape, params)
     density = params.patch_size**2 / params.patch_offset**2
@@ -682,7 +772,7 @@ def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv, theta, tau,
-                         max_iter, tol, n_sweeps, aniso, blocks):
+                         max_iter, tol, n_sweeps, aniso, blocks, huber=0.0):
     """Exact TV-L1 primal-dual iterations on the combined energy (in place on u, p, tp, q).
 
     The scheme of :func:`varflow.twoframe.tvl1.tvl1_iterations` (one iteration
@@ -692,8 +782,9 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
         v = argmin_v |v − u|²/(2θ) + w |v − ū|² + λ Σ_c |ρ_c(v)|
           = prox_{t' Σ|ρ_c|}(z),  z = (u + 2θw ū)/(1 + 2θw),  t' = λθ/(1 + 2θw),
 
-    and the TV weighted by λ_TV (the dual ball radius ``λ_TV g``).  With ``w ≡ 0``
-    and ``λ_TV = 1`` it is :func:`~varflow.twoframe.tvl1.tvl1_iterations`.
+    and the TV weighted by λ_TV (the dual ball radius ``λ_TV g``; with ε_H > 0 the
+    Huber-TV step of :func:`~varflow.twoframe.tvl1.tvl1_iterations`).  With
+    ``w ≡ 0`` and ``λ_TV = 1`` it is :func:`~varflow.twoframe.tvl1.tvl1_iterations`.
 
     Parameters
     ----------
@@ -709,6 +800,8 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
     aniso : bool
     blocks : (n+1,) int64
         Row-block bounds from :func:`~varflow.twoframe.tvl1._row_blocks`.
+    huber : float
+        ε_H of Huber-TV (0: TV).
 
     Returns
     -------
@@ -752,16 +845,16 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
                 err = _primal_row(u, tp, i, 0, d1, theta)
                 errs[i] = err + _primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
-                    _dual_row(u, p, tp, gs, tens, i - 1, step, aniso)
+                    _dual_row(u, p, tp, gs, tens, i - 1, step, aniso, huber)
         for b in nb.prange(n_blk):
-            _dual_row(u, p, tp, gs, tens, blocks[b + 1] - 1, step, aniso)
+            _dual_row(u, p, tp, gs, tens, blocks[b + 1] - 1, step, aniso, huber)
         if _ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
 
 def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv, theta,
-                               tau, max_iter, tol, n_sweeps, aniso, blocks=None):
+                               tau, max_iter, tol, n_sweeps, aniso, blocks=None, huber=0.0):
     """NumPy reference of :func:`sparse_pd_iterations` (same arguments, in place)."""
     _, h, w = a.shape
     s = (1.0 / (1.0 + 2 * theta * wsp)).astype(np.float32)
@@ -793,8 +886,9 @@ def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, 
             grad = gradient(u[k])
             if aniso:
                 grad = np.einsum("hwab,hwb->hwa", T, grad)
-            pk = project_l2_ball(np.moveaxis(p[2 * k : 2 * k + 2], 0, -1) + (tau / theta) * grad,
-                                 gs)
+            pk = prox_huber_conjugate(
+                np.moveaxis(p[2 * k : 2 * k + 2], 0, -1) + (tau / theta) * grad, tau / theta,
+                huber, gs)
             p[2 * k : 2 * k + 2] = np.moveaxis(pk, -1, 0)
             if aniso:
                 tp[2 * k : 2 * k + 2] = np.moveaxis(np.einsum("hwab,hwb->hwa", T, pk), -1, 0)
@@ -806,7 +900,7 @@ def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, 
 # --------------------------------------------------------------------- the solver
 
 
-def _init_level(I0, params: SparseParams, state: dict) -> None:
+def _init_level(I0, params: SparseFields, state: dict) -> None:
     if params.regulariser == "tensor":
         init_tensor_level(I0, params, state)
     else:
@@ -815,13 +909,13 @@ def _init_level(I0, params: SparseParams, state: dict) -> None:
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseParams, state: dict,
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseFields, state: dict,
     engine: str = "numba",
 ):
     """Single-level, single-warp solver of sparse-regularised TV-L1 (driver plug-in).
 
     Warps ``0 … n_warps-1`` of a level run TV-L1 (isotropic or tensor); on levels
-    where :meth:`SparseParams.sparse_active` holds, the following ``sparse_warps``
+    where :meth:`SparseFields.sparse_active` holds, the following ``sparse_warps``
     learn the dictionaries (first sparse warp), code the current flow and minimise
     the combined energy with Nesterov's method or the primal-dual scheme
     (``params.combined_solver``).  Arguments as in
@@ -851,29 +945,33 @@ def solve_warp(
     lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.get("level", 0)
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
-    ix, iy, a = linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
+    # every channel of the energy's data term (the gradient constancy too), weights folded in
+    ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
     u = planar(flow0, copy=True)
     tens, aniso = kernel_tensor(state)
     wsp = (np.float32(lam_sp) * state["coverage"]).astype(np.float32)
     if params.combined_solver == "primal-dual":
         args = (
-            ix, iy, a, state["g"], tens, u, state["p"], state["tp"], state["q"], planar(ubar),
+            ix, iy, a, state["g"], tens, u, state["p"], state["tp"],
+            data_duals(state, ix.shape[0]), planar(ubar),
             wsp, np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
             np.float32(params.combined_coupling), np.float32(params.tv_step),
             params.combined_iterations, np.float32(params.combined_tolerance),
             params.data_sweeps, aniso,
         )
         if engine == "numba":
-            n = sparse_pd_iterations(*args, _row_blocks(I0.shape[0]))
+            n = sparse_pd_iterations(*args, _row_blocks(I0.shape[0]), np.float32(params.huber))
         else:
-            n = sparse_pd_iterations_numpy(*args)
+            n = sparse_pd_iterations_numpy(*args, None, params.huber)
         state["iterations"] = state.get("iterations", 0) + n
     else:
         stages = params.nesterov_stages
+        # Huber-TV (ε_H) smoothed with μ_TV is the Huber function of ε_H + μ_TV
+        # (Moreau envelopes add their parameters)
         args = (
             ix, iy, a, state["g"], tens, aniso, planar(ubar), wsp, u,
             np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
-            _continuation(params.smoothing_tv, stages),
+            _continuation(params.smoothing_tv + params.huber, stages),
             _continuation(params.smoothing_data, stages),
             max(1, params.nesterov_iterations // stages),
         )

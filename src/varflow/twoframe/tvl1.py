@@ -73,6 +73,7 @@ __all__ = [
     "tvl1_iterations_numpy",
     "edge_weight",
     "data_channels",
+    "data_duals",
 ]
 
 
@@ -1022,6 +1023,26 @@ def kernel_tensor(state: dict) -> tuple[np.ndarray, bool]:
     return (_NO_TENSOR, False) if tens is None else (tens, True)
 
 
+def data_duals(state: dict, n_channels: int) -> np.ndarray:
+    """The dual variables ``q`` of the data prox for ``n_channels`` channels of
+    :func:`data_channels` (warm started across the warps of a level).
+
+    ``state["q"]`` holds those of the colour channels; with extra channels (the
+    gradient-constancy term) one array ``state["q_all"]`` holds every dual variable
+    and ``state["q"]`` becomes a view of its first planes.
+    """
+    nc = state["q"].shape[0]
+    if n_channels == nc:
+        return state["q"]
+    q = state.get("q_all")
+    if q is None or q.shape[0] != n_channels:
+        extra = np.zeros((n_channels - nc,) + state["q"].shape[1:], np.float32)
+        q = np.concatenate([state["q"], extra])
+        state["q_all"] = q
+        state["q"] = q[:nc]
+    return q
+
+
 def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict,
              engine: str = "numba") -> np.ndarray:
     """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
@@ -1035,15 +1056,7 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
     u = planar(flow0, copy=True)
     tens, aniso = kernel_tensor(state)
-    nc = state["q"].shape[0]
-    q = state["q"]
-    if ix.shape[0] != nc:  # extra channels: one array holds every dual variable,
-        q = state.get("q_all")  # and state["q"] is a view of its first nc planes
-        if q is None or q.shape[0] != ix.shape[0]:
-            extra = np.zeros((ix.shape[0] - nc,) + state["q"].shape[1:], np.float32)
-            q = np.concatenate([state["q"], extra])
-            state["q_all"] = q
-            state["q"] = q[:nc]
+    q = data_duals(state, ix.shape[0])
     args = (
         ix, iy, a, state["g"], tens, u, state["p"], state["tp"], q,
         np.float32(params.data_weight), np.float32(params.coupling), np.float32(params.tv_step),
