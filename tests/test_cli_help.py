@@ -1,7 +1,7 @@
 """``--help`` states the defaults of the method that will run (issue 26).
 
 Without ``--method`` the help gives every method's default where they differ
-(``(default 4; tvl1-*: 3; tensor, sparse-*: 5)``); with ``--method NAME`` on the
+(``(default 4; tvl1-fast, tvl1-ld: 3; tensor, sparse-*: 5)``); with ``--method NAME`` on the
 command line, only NAME's, and it hides the flags NAME does not have.
 """
 
@@ -55,13 +55,14 @@ def test_flow_help_gives_every_method_default_where_they_differ(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     text = help_text(capsys, "flow")
-    assert "(default 4; tvl1-*: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
+    assert "(default 4; tvl1-fast, tvl1-ld: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
     assert "(default 15.0; tensor, sparse-*: 40.0)" in flag_help(text, "--data-weight")
     assert "(default True; tensor, sparse-*: False)" in flag_help(text, "--grey")
     assert "(default 0.8; tvl1-fast: 0.5)" in flag_help(text, "--scale-factor")
     assert "(default 40)" in flag_help(text, "--max-levels")  # one value for all
     dictionary = flag_help(text, "--dictionary")
-    assert "(default dct; sparse-1d, sparse-2x1d, sparse-2d: mod; methods: sparse-*)" in dictionary
+    assert ("(default dct; sparse-1d, sparse-2x1d, sparse-2d, tvl1-sparse-1d, tvl1-sparse-2x1d, "
+            "tvl1-sparse-2d: mod; methods: sparse-*, tvl1-sparse-*)") in dictionary
 
 
 @pytest.mark.parametrize(("method", "n_warps", "data_weight", "grey"), [
@@ -90,7 +91,7 @@ def test_help_after_the_flag_and_unknown_method(capsys: pytest.CaptureFixture[st
     assert rc == 0 and flag_help(text, "--n-warps").endswith("(default 5)")
     # an unknown name: every method's defaults (the run itself reports the name)
     text = help_text(capsys, "flow", "--method", "nope")
-    assert "(default 4; tvl1-*: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
+    assert "(default 4; tvl1-fast, tvl1-ld: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
 
 
 @pytest.mark.parametrize("method", list(METHODS))
@@ -131,7 +132,7 @@ def test_track_and_batch_help_without_method(capsys: pytest.CaptureFixture[str])
     text = help_text(capsys, "batch", "track")
     assert "(default 0; twoframe, chain: 3)" in flag_help(text, "--weighted-median-levels")
     text = help_text(capsys, "batch", "flow")
-    assert "(default 4; tvl1-*: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
+    assert "(default 4; tvl1-fast, tvl1-ld: 3; tensor, sparse-*: 5)" in flag_help(text, "--n-warps")
     text = help_text(capsys, "batch", "flow", "--method", "tvl1-ld")
     assert flag_help(text, "--n-warps").endswith("(default 3)")
 

@@ -179,18 +179,23 @@ def _method_names(names: Sequence[str], registry: Mapping[str, Any]) -> str:
     """``names`` joined by commas, a whole family written ``sparse-*``.
 
     A family is every registered name that starts with the same ``prefix-`` (at
-    least two of them); it is abbreviated only when all its members are in ``names``.
+    least two of them; ``tvl1-`` or ``tvl1-sparse-`` for ``tvl1-sparse-1d``); it is
+    abbreviated only when all its members are in ``names``, by the shortest such
+    prefix.
     """
     out: list[str] = []
     done: set[str] = set()
     for n in names:
         if n in done:
             continue
-        prefix = n.split("-")[0] + "-" if "-" in n else None
-        family = [m for m in registry if prefix and m.startswith(prefix)]
-        if len(family) >= 2 and set(family) <= set(names):
-            out.append(prefix + "*")
-            done.update(family)
+        parts = n.split("-")
+        for k in range(1, len(parts)):
+            prefix = "-".join(parts[:k]) + "-"
+            family = [m for m in registry if m.startswith(prefix)]
+            if len(family) >= 2 and set(family) <= set(names):
+                out.append(prefix + "*")
+                done.update(family)
+                break
         else:
             out.append(n)
             done.add(n)

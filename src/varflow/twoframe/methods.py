@@ -108,6 +108,42 @@ METHODS: dict[str, Method] = {
         solve_warp=_sparse.solve_warp,
         description="sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
     ),
+    # the same regularisers on tvl1's energy (grey L1 + gradient constancy, Huber-TV,
+    # noise rule, weighted median, sharpness match); the ones above keep the book's
+    "tvl1-tensor": Method(
+        name="tvl1-tensor",
+        params=_tensor.TVL1TensorParams,
+        solve_warp=_tensor.solve_warp,
+        description="tensor-directed TV-L1 on tvl1's energy",
+    ),
+    "tvl1-sparse-dct": Method(
+        name="tvl1-sparse-dct",
+        params=_sparse.TVL1SparseDCTParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1 on tvl1's energy, fixed overcomplete DCT "
+        "dictionary",
+    ),
+    "tvl1-sparse-1d": Method(
+        name="tvl1-sparse-1d",
+        params=_sparse.TVL1Sparse1DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionary shared by u "
+        "and v",
+    ),
+    "tvl1-sparse-2x1d": Method(
+        name="tvl1-sparse-2x1d",
+        params=_sparse.TVL1Sparse2x1DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionaries for u and "
+        "for v",
+    ),
+    "tvl1-sparse-2d": Method(
+        name="tvl1-sparse-2d",
+        params=_sparse.TVL1Sparse2DParams,
+        solve_warp=_sparse.solve_warp,
+        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionary of joint "
+        "[u; v] patches",
+    ),
 }
 
 
