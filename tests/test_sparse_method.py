@@ -9,6 +9,7 @@ from _problems import linearised_sparse_problem
 import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.twoframe import sparse as sp
+from varflow.twoframe.tensor import TensorParams
 from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
 
 
@@ -125,7 +126,7 @@ def test_invalid_parameters_name_the_field(field):
 
 
 def test_every_new_field_has_a_validity_test():
-    base = {f.name for f in dataclasses.fields(sp.TensorParams)}
+    base = {f.name for f in dataclasses.fields(TensorParams)}
     new = {f.name for f in dataclasses.fields(sp.SparseParams)} - base
     assert new - {"seed"} <= set(_BAD)
 
