@@ -19,6 +19,9 @@ Uses:
 * :func:`fuse` — keep, per pixel, the candidate field with the smallest cost.
 * :func:`candidate_costs` — the costs of several candidates with the weights made
   on the fly (no weight planes), for a single use of them (a level of ``tvl1-ld``).
+* :func:`census_planes` — a soft census transform of a frame: planes whose
+  residual is insensitive to a change of brightness or contrast, for a fusion
+  cost that holds under illumination drift (pass them as ``i0``/``i1``).
 * :func:`repair` — spatial propagation of flow vectors in the manner of
   PatchMatch (Barnes et al. 2009): every pixel tries the current vectors of the
   pixels at a few offsets (8 directions × ``distances``) and keeps one that lowers
@@ -52,6 +55,7 @@ __all__ = [
     "support_weights",
     "flow_cost",
     "fuse",
+    "census_planes",
     "candidate_costs",
     "repair",
     "noise_sigma",
@@ -451,6 +455,50 @@ def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: 
         best_cost = np.where(better, cost, best_cost)
         choice[better] = k
     return best, choice
+
+
+#: The 8 neighbours ``(dy, dx)`` of :func:`census_planes`.
+CENSUS_OFFSETS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+
+
+def census_planes(image: np.ndarray, eps: float = 0.02) -> np.ndarray:
+    """Soft census transform: ``½ tanh((I(x + o) − I(x)) / ε)`` for the 8 neighbours ``o``.
+
+    ``I`` is the mean of the channels.  Each plane says, smoothly, whether a
+    neighbour is brighter or darker than the pixel, so that the residual of
+    :func:`flow_cost` between two frames' planes (values in [−½, ½], pass
+    ``truncation=0.5``) is unchanged by a brightness offset and nearly so by a
+    contrast change, where the colour residual is truncated everywhere (Zabih &
+    Woodfill 1994, census transform; the ``tanh`` keeps it differentiable in
+    ``I`` and quiet on noise below ``ε``).  Borders replicate the edge pixel.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C), float
+        Intensities in [0, 1].
+    eps : float
+        ε, the intensity difference at which a comparison is 76 % decided, > 0.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 8), float32
+
+    References
+    ----------
+    R. Zabih, J. Woodfill, "Non-parametric local transforms for computing visual
+    correspondence", ECCV 1994.
+    """
+    if not eps > 0:
+        raise ValueError(f"eps: must be > 0, got {eps}")
+    img = _check_image(image, "image")
+    g = img.mean(axis=2, dtype=np.float32)
+    h, w = g.shape
+    pad = np.pad(g, 1, mode="edge")
+    out = np.empty((h, w, len(CENSUS_OFFSETS)), np.float32)
+    inv = np.float32(1.0 / eps)
+    for k, (dy, dx) in enumerate(CENSUS_OFFSETS):
+        out[..., k] = np.tanh((pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] - g) * inv) * 0.5
+    return out
 
 
 @nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
