@@ -184,8 +184,8 @@ def test_tracker_far_frames_follow_a_fast_object_with_matching():
     def disc_epe(traj):
         return [float(np.hypot(*(traj[n] - gt[n])[disc].T).mean()) for n in far]
 
-    plain = varflow.track(frames, ref, "rlr")
-    guided = varflow.track(frames, ref, "rlr", propagate_matching=True)
+    plain = varflow.track(frames, ref, "rlr", propagate_matching=False)
+    guided = varflow.track(frames, ref, "rlr", propagate_matching=True)  # the default
     # the disc (51 px away, radius 20) is lost: mean EPE 45 and 19 px on it; with
     # matching 0.46 and 2.27 px (host build), 0.46 and 1.74 (NUMBA_CPU_NAME=generic),
     # at most 2.27 over the L-step seeds 0-2 and both builds (2026-12-01).  With a
@@ -216,11 +216,10 @@ def test_tracker_far_frames_follow_a_fast_object_with_matching():
 
 def test_the_fit_gate_keeps_the_link_off_a_fast_object():
     """Issue 27: with tvl1's energy the link τ = 2 pulls the disc towards the clip's
-    low-rank fit (far frames 5.2-6.7 px over L-step seeds 0-2, 0.12 px decoupled); the
-    fit gate decouples the region the model does not hold.  Measured (2026-12-02, k = 2):
-    0.11-0.28 px on tvl1's energy, 0.14-0.19 on the plain one (0.27-2.24 ungated)."""
+    low-rank fit; the fit gate decouples the region the model does not hold.  Measured
+    (2026-12-02, the matching-guided candidates, L-step seeds 0-2): far frames
+    0.22-0.48 px with the default gate (k = 1), 0.89-4.38 ungated, 0.12-0.15 decoupled."""
     from varflow.generators.large_pairs import fast_object_clip
-    from varflow.multiframe.rlr import TVL1_ENERGY
 
     frames, gt, disc, ref = fast_object_clip()
     far = [0, frames.shape[0] - 1]
@@ -228,8 +227,8 @@ def test_the_fit_gate_keeps_the_link_off_a_fast_object():
     def disc_epe(traj):
         return [float(np.hypot(*(traj[n] - gt[n])[disc].T).mean()) for n in far]
 
-    for energy in ({}, {"flow_params": TVL1_ENERGY}):
-        errs = np.array([disc_epe(varflow.track(frames, ref, "rlr", propagate_matching=True,
-                                                link_gate=2.0, seed=s, **energy))
-                         for s in (0, 1, 2)])
-        assert errs.max() < 0.8, (energy.keys(), errs)
+    gated, ungated = (np.array([disc_epe(varflow.track(frames, ref, "rlr", seed=s, **kw))
+                                for s in (0, 1, 2)])
+                      for kw in ({}, {"link_gate": 0.0}))
+    assert gated.max() < 0.8, gated
+    assert ungated.mean() > 3.0 * gated.mean(), (gated, ungated)
