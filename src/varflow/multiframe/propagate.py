@@ -31,21 +31,21 @@ Where they disagree the pixel keeps the candidate with the smaller edge-aware
 cost (:func:`varflow.ops.fusion.fuse`: a residual aggregated with adaptive
 support weights of the reference frame); the propagated candidate wins ties.
 The residual is that of the frames' soft census planes
-(:func:`varflow.ops.fusion.census_planes`, ``cost="census"``), which a change
-of brightness or contrast leaves alone, or of their colours (``"colour"``).  On
-the tuning split of the photographic clips (seeds 0–2, 31 frames), fusing the
-propagated and the ``tvl1-ld`` candidates gave initial trajectories of mean
-EPE 0.486 with the census cost and 0.648 with the colour cost (the propagated
+(:func:`varflow.ops.fusion.census_planes`, ``cost="census"``), which a change of
+brightness or contrast leaves alone, or of their colours (``"colour"``).  On the
+tuning split of the photographic clips (seeds 0–2, 31 frames), fusing the
+propagated and the ``tvl1-ld`` candidates gave initial trajectories of mean EPE
+0.486 with the census cost and 0.648 with the colour cost (the propagated
 candidates alone 0.697, ``tvl1-ld`` alone 0.661): under an illumination drift
 the colour residual is truncated everywhere and the choice is left to chance
-(1.33 against 2.20 on that family).  For ``n = r ± 1`` there is nothing to propagate and only the
-direct flow is computed.  Last, :func:`varflow.ops.fusion.repair` lets every pixel
-take the vector of a pixel a few pixels away where that fits the frames better:
-the coarse-to-fine smoothing leaves a band of the wrong motion along object
-edges, and a propagated band would grow by a pixel or so per frame.  The frames
-``r ± 1`` can skip the repair (``repair_adjacent=False``): their flows were not
-propagated, and on real footage the photometric cost is the less reliable of
-the two.
+(1.33 against 2.20 on that family).  For ``n = r ± 1`` there is nothing to
+propagate: the direct flow is the first candidate.  Last,
+:func:`varflow.ops.fusion.repair` lets every pixel take the vector of a pixel a
+few pixels away where that fits the frames better: the coarse-to-fine smoothing
+leaves a band of the wrong motion along object edges, and a propagated band
+would grow by a pixel or so per frame.  The frames ``r ± 1`` can skip the repair
+(``repair_adjacent=False``): their flows were not propagated, and on real
+footage the photometric cost is the less reliable of the two.
 
 Every frame is pre-processed and its pyramid built once
 (:func:`frame_pyramids`); the pyramids are shared by every pair and by the
