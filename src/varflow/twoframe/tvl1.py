@@ -761,21 +761,6 @@ def robust_data_term(params: TVL1Params) -> bool:
     return params.gradient_weight > 0 or params.data_normalisation > 0
 
 
-def require_plain_tvl1(params: TVL1Params, stage: str) -> None:
-    """Refuse γ, ζ or ε_H ≠ 0 for a method whose ``stage`` has the plain TV-L1 energy.
-
-    Raises
-    ------
-    ValueError
-        Naming the field (``gradient_weight: ...``, ``data_normalisation: ...`` or
-        ``huber: ...``).
-    """
-    for name in ("gradient_weight", "data_normalisation", "huber"):
-        _check(getattr(params, name) == 0, name,
-               f"must be 0 here: {stage} has the colour data term and TV only, got "
-               f"{getattr(params, name)}")
-
-
 def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict):
     """All channels of the linearised data term of one warp, weights folded in.
 
