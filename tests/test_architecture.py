@@ -119,3 +119,43 @@ def test_io_keeps_to_readers_and_writers(name: str) -> None:
            if target == "argparse" or target.startswith("argparse.")
            or target == "varflow.cli" or target.startswith("varflow.cli.")]
     assert not bad, "\n".join(bad)
+
+
+def _private_imports(name: str) -> list[tuple[str, str, int]]:
+    """``(module, private name, line)`` of every ``from X import _y`` of a module."""
+    path, is_package = MODULES[name]
+    package = name if is_package else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            out += [(target, a.name, node.lineno) for a in node.names
+                    if a.name.startswith("_") and not a.name.startswith("__")]
+    return out
+
+
+SOLVER_PACKAGES = ("varflow.ops", "varflow.twoframe", "varflow.multiframe")
+
+
+@pytest.mark.parametrize("name", [n for n in MODULES if n.startswith(SOLVER_PACKAGES)])
+def test_solvers_use_public_entry_points_across_packages(name: str) -> None:
+    """Issue 27: the multi-frame refinement is built from the two-frame machinery's
+    public entry points (the row kernels of :mod:`varflow.ops.primal_dual`, TV-L1's
+    ``data_channels``, the driver's ``run_levels``), not from another package's
+    private names."""
+    package = name.rpartition(".")[0] if not MODULES[name][1] else name
+    bad = [f"{name}:{line} imports {target}.{attr}"
+           for target, attr, line in _private_imports(name)
+           if target.startswith("varflow.") and target != package
+           and not target.startswith(package + ".") and target.rpartition(".")[0] != package]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_private_import_checker_sees_a_planted_import() -> None:
+    assert [a for _, a, _ in _private_imports("varflow.ops.median")] == ["_NO_REASSOC",
+                                                                         "_exp_neg_row"]

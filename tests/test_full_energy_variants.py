@@ -16,11 +16,12 @@ from _problems import linearised_sparse_problem
 
 import varflow
 from varflow.generators.pairs import synthetic_pair
+from varflow.ops.primal_dual import row_blocks
 from varflow.twoframe import sparse as sp
 from varflow.twoframe import tensor, tvl1
 from varflow.twoframe.coarse_to_fine import coarse_to_fine
 from varflow.twoframe.methods import METHODS
-from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params, _row_blocks
+from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
 FULL = {
     "tvl1-tensor": tensor.TVL1TensorParams,
@@ -166,7 +167,7 @@ def test_sparse_pd_kernel_engines_agree_with_huber():
         tp, q = np.zeros_like(p), np.zeros((terms["a"].shape[0], h, w), np.float32)
         args = (*terms.values(), u, p, tp, q, ubar, wsp, np.float32(40.0), np.float32(1.0),
                 np.float32(0.3), np.float32(0.25), 30, np.float32(0.0), 1, True)
-        blocks = _row_blocks(h) if fn is sp.sparse_pd_iterations else None
+        blocks = row_blocks(h) if fn is sp.sparse_pd_iterations else None
         assert fn(*args, blocks, 0.05) == 30
         outs.append(u)
     np.testing.assert_allclose(outs[0], outs[1], atol=1e-4)

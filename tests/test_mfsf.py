@@ -15,8 +15,9 @@ from varflow.multiframe.rlr import (
     ustep_iterations_numpy,
 )
 from varflow.multiframe.track import check_frames
+from varflow.ops.primal_dual import row_blocks
 from varflow.registry import make_track_params
-from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
+from varflow.twoframe.tvl1 import PlainTVL1Params
 
 
 def test_dct_basis_is_orthonormal_and_separates_u_and_v():
@@ -58,7 +59,7 @@ def test_quadratic_coupling_numba_matches_numpy(exact):
         p = np.zeros((4, h, w), np.float32)
         q = np.zeros((3, h, w), np.float32)
         kern(ix, iy, a, g, u, p, q, np.empty_like(u), m, np.float32(3), np.float32(40),
-             np.float32(0.25), 30, np.float32(0), 1, exact, _row_blocks(h))
+             np.float32(0.25), 30, np.float32(0), 1, exact, row_blocks(h))
         outs.append(u)
     np.testing.assert_allclose(outs[0], outs[1], atol=2e-4)
 
@@ -73,7 +74,7 @@ def test_a_strong_quadratic_coupling_pulls_onto_the_target():
         ustep_iterations(ix, iy, a, g, u, np.zeros((4, h, w), np.float32),
                          np.zeros((3, h, w), np.float32), np.empty_like(u), m,
                          np.float32(beta), np.float32(40), np.float32(0.25), 200,
-                         np.float32(0), 1, False, _row_blocks(h))
+                         np.float32(0), 1, False, row_blocks(h))
         dist.append(float(np.abs(u - m).mean()))
     assert dist[2] < 0.01 < dist[1] < dist[0]
 

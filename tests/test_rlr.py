@@ -23,9 +23,10 @@ from varflow.multiframe.rlr import (
 )
 from varflow.multiframe.track import check_frames
 from varflow.ops.differences import gradient
+from varflow.ops.primal_dual import row_blocks
 from varflow.ops.prox import linear_l1_energy, prox_linear_l1_exact
 from varflow.registry import make_track_params
-from varflow.twoframe.tvl1 import _row_blocks, tvl1_iterations
+from varflow.twoframe.tvl1 import tvl1_iterations
 
 RNG = np.random.default_rng(7)
 NO_M = np.zeros((2, 1, 1), np.float32)
@@ -124,7 +125,7 @@ def test_ustep_numba_matches_numpy(exact, huber):
         q = np.zeros((a.shape[0], h, w), np.float32)
         n = kern(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0), np.float32(40),
                  np.float32(0.25),
-                 30, np.float32(0), 1, exact, _row_blocks(h), np.float32(huber))
+                 30, np.float32(0), 1, exact, row_blocks(h), np.float32(huber))
         assert n == 30
         outs.append((u, p))
     np.testing.assert_allclose(outs[0][0], outs[1][0], atol=2e-4)
@@ -148,7 +149,7 @@ def test_coordinate_descent_prox_converges_to_the_exact_one():
         q = np.zeros((a.shape[0], h, w), np.float32)
         ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0),
                          np.float32(40), np.float32(0.25), 3000, np.float32(0), 2, exact,
-                         _row_blocks(h))
+                         row_blocks(h))
         res[exact] = u
     e_cd, e_ex = (_energy(res[k], ix, iy, a, g, 40.0) for k in (False, True))
     assert abs(e_cd - e_ex) < 1e-3 * e_ex
@@ -166,12 +167,12 @@ def test_primal_dual_reaches_a_lower_energy_than_the_coupled_tvl1_scheme():
     q = np.zeros((3, h, w), np.float32)
     ustep_iterations(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0),
                      np.float32(40), np.float32(0.25),
-                     4000, np.float32(0), 2, False, _row_blocks(h))
+                     4000, np.float32(0), 2, False, row_blocks(h))
     uz = np.zeros((2, h, w), np.float32)
     pz = np.zeros((4, h, w), np.float32)
     tvl1_iterations(ix, iy, a, g, np.zeros((3, 1, 1), np.float32), uz, pz, pz,
                     np.zeros((3, h, w), np.float32), np.float32(40), np.float32(0.3),
-                    np.float32(0.25), 4000, np.float32(0), 2, False, _row_blocks(h))
+                    np.float32(0.25), 4000, np.float32(0), 2, False, row_blocks(h))
     e_pd, e_z = _energy(u, ix, iy, a, g, 40.0), _energy(uz, ix, iy, a, g, 40.0)
     assert e_pd <= e_z * (1 + 1e-4), (e_pd, e_z)
     assert e_pd < _energy(np.zeros_like(u), ix, iy, a, g, 40.0)

@@ -8,9 +8,10 @@ from _problems import linearised_sparse_problem
 
 import varflow
 from varflow.generators.pairs import synthetic_pair
+from varflow.ops.primal_dual import row_blocks
 from varflow.twoframe import sparse as sp
 from varflow.twoframe.tensor import TensorParams
-from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks
+from varflow.twoframe.tvl1 import PlainTVL1Params
 
 
 def aee(a, b):
@@ -32,7 +33,7 @@ def test_nesterov_engines_agree(aniso):
         u = u0.copy()
         args = (*prob.values(), u, np.float32(40.0), np.float32(1.0), mus, mus, 25)
         if fn is sp.nesterov_iterations:
-            fn(*args, _row_blocks(u.shape[1]))
+            fn(*args, row_blocks(u.shape[1]))
         else:
             fn(*args)
         outs.append(u)
@@ -50,7 +51,7 @@ def test_nesterov_decreases_the_smoothed_energy_monotonically_enough(aniso):
         u = u0.copy()
         sp.nesterov_iterations(*prob.values(), u, np.float32(lam), np.float32(lam_tv),
                                np.array([mu], np.float32), np.array([mu], np.float32), n,
-                               _row_blocks(u.shape[1]))
+                               row_blocks(u.shape[1]))
         return sp.smoothed_energy(u, *prob.values(), lam, lam_tv, mu, mu)
 
     e = [sp.smoothed_energy(u0, *prob.values(), lam, lam_tv, mu, mu)] + [

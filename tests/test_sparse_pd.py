@@ -6,8 +6,9 @@ from _problems import linearised_sparse_problem
 
 import varflow
 from varflow.generators.pairs import synthetic_pair
+from varflow.ops.primal_dual import row_blocks
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tvl1 import PlainTVL1Params, _row_blocks, tvl1_iterations
+from varflow.twoframe.tvl1 import PlainTVL1Params, tvl1_iterations
 
 LAM, THETA, TAU, TOL = 40.0, 0.3, 0.25, 0.0
 
@@ -31,7 +32,7 @@ def _run_pd(fn, prob, ubar, wsp, u0, aniso, n_iter, lam_tv=1.0, n_sweeps=1):
             np.float32(lam_tv), np.float32(THETA), np.float32(TAU), n_iter, np.float32(TOL),
             n_sweeps, aniso)
     if fn is sp.sparse_pd_iterations:
-        n = fn(*args, _row_blocks(u0.shape[1]))
+        n = fn(*args, row_blocks(u0.shape[1]))
     else:
         n = fn(*args)
     assert n == n_iter
@@ -57,7 +58,7 @@ def test_pd_without_sparse_weight_is_tvl1(aniso):
     ref = _state(u0, prob["a"].shape[0], aniso, prob["tens"])
     tvl1_iterations(prob["ix"], prob["iy"], prob["a"], prob["g"], prob["tens"], ref["u"],
                     ref["p"], ref["tp"], ref["q"], np.float32(LAM), np.float32(THETA),
-                    np.float32(TAU), 40, np.float32(TOL), 1, aniso, _row_blocks(u0.shape[1]))
+                    np.float32(TAU), 40, np.float32(TOL), 1, aniso, row_blocks(u0.shape[1]))
     # The two kernels are compiled separately with fastmath, so the rounding may differ:
     # measured up to 3e-6 after 40 iterations when one comes from Numba's cache and the
     # other is freshly compiled (0 when both come from the same state).  A sparse weight

@@ -8,6 +8,7 @@ from varflow.generators.pairs import synthetic_pair
 from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe import tensor as tensor_mod
+from varflow.twoframe.coarse_to_fine import LevelState
 from varflow.twoframe.tensor import TensorParams, diffusion_tensor
 from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
@@ -61,7 +62,7 @@ def test_tensor_engines_agree():
     outs = []
     for engine in ("numba", "numpy"):
         outs.append(tensor_mod.solve_warp(f0, warped[..., :3], warped[..., 3:6], warped[..., 6:],
-                                          inside, flow0, params, {}, engine=engine))
+                                          inside, flow0, params, LevelState(), engine=engine))
     np.testing.assert_allclose(outs[0], outs[1], atol=2e-4)
     assert aee(outs[0], flow0) > 0.05
 

@@ -7,12 +7,12 @@ import pytest
 
 import varflow
 from varflow.generators.pairs import TextureField, synthetic_pair
+from varflow.ops.primal_dual import NO_TENSOR, row_blocks
 from varflow.ops.warp import warp_bicubic
+from varflow.twoframe.coarse_to_fine import LevelState
 from varflow.twoframe.tvl1 import (
-    _NO_TENSOR,
     PlainTVL1Params,
     TVL1Params,
-    _row_blocks,
     linearise,
     linearise_numpy,
     solve_warp,
@@ -119,7 +119,7 @@ def test_numba_and_numpy_engines_agree():
     params = TVL1Params(max_iterations=40, tolerance=0.0, edge_weight=5.0)
     outs = []
     for engine in ("numba", "numpy"):
-        state: dict = {}
+        state = LevelState()
         outs.append(solve_warp(f0, warped[..., :3], warped[..., 3:6], warped[..., 6:], inside,
                                flow0, params, state, engine=engine))
     np.testing.assert_allclose(outs[0], outs[1], atol=2e-4)
@@ -198,7 +198,7 @@ def test_two_iterations_per_pass_equal_single_passes_bit_for_bit(h, aniso):
     w, nc = 29, 3
     ix, iy, a = (rng.normal(size=(nc, h, w)).astype(np.float32) * 0.1 for _ in range(3))
     g = rng.uniform(0.05, 1.0, (h, w)).astype(np.float32)
-    tens = rng.uniform(0.2, 1.0, (3, h, w)).astype(np.float32) if aniso else _NO_TENSOR
+    tens = rng.uniform(0.2, 1.0, (3, h, w)).astype(np.float32) if aniso else NO_TENSOR
     if aniso:
         tens[1] *= 0.3
     runs = []
@@ -209,7 +209,7 @@ def test_two_iterations_per_pass_equal_single_passes_bit_for_bit(h, aniso):
         q = np.zeros((nc, h, w), np.float32)
         for _ in range(n_calls):
             tvl1_iterations(ix, iy, a, g, tens, u, p, tp, q, np.float32(15), np.float32(0.3),
-                            np.float32(0.25), n_iter, np.float32(0), 1, aniso, _row_blocks(h),
+                            np.float32(0.25), n_iter, np.float32(0), 1, aniso, row_blocks(h),
                             np.float32(0.02))
         runs.append((u, p, q))
     assert np.abs(runs[0][0]).max() > 0.05  # it moved
@@ -276,14 +276,14 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
 
 
 def test_dual_projection_kernel_matches_the_numpy_projection():
+    from varflow.ops.primal_dual import project_dual
     from varflow.ops.prox import project_l2_ball
-    from varflow.twoframe.tvl1 import _project_dual
 
     rng = np.random.default_rng(7)
     p = rng.normal(0, 1, (4, 23, 31)).astype(np.float32)
     g = rng.uniform(0.05, 1.0, (23, 31)).astype(np.float32)
     want = project_l2_ball(np.moveaxis(p, 0, -1).reshape(23, 31, 2, 2), g[..., None])
     got = p.copy()
-    _project_dual(got, g)
+    project_dual(got, g)
     np.testing.assert_allclose(np.moveaxis(got, 0, -1).reshape(23, 31, 2, 2), want, atol=1e-6)
     assert (np.abs(got - p) > 1e-3).any()  # some pairs were outside their ball

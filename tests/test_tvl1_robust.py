@@ -9,6 +9,7 @@ import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
+from varflow.twoframe.coarse_to_fine import LevelState
 from varflow.twoframe.tensor import TensorParams
 from varflow.twoframe.tvl1 import (
     PlainTVL1Params,
@@ -67,11 +68,11 @@ def test_zero_weights_reduce_exactly_to_plain_tvl1(gain_pair):
                                    data_normalisation=0.0))
     np.testing.assert_array_equal(plain, same)
     args = warped_inputs(f0, f1, np.zeros(f0.shape[:2] + (2,), np.float32))
-    state: dict = {}
+    state = LevelState()
     for got, want in zip(data_channels(*args, PlainTVL1Params(), state), linearise(*args),
                          strict=True):
         np.testing.assert_array_equal(got, want)
-    assert state == {}  # nothing cached, no extra dual variables
+    assert state == LevelState()  # nothing cached, no extra dual variables
 
 
 # ------------------------------------------------------------------ the channels
@@ -82,7 +83,7 @@ def test_gradient_channels_are_the_linearised_gradient_constancy():
     flow0 = (0.5 * gt).astype(np.float32)
     args = warped_inputs(f0, f1, flow0)
     p = PlainTVL1Params(data_weight=8.0, gradient_weight=20.0, gradient_sigma=0.0)
-    ix, iy, a = data_channels(*args, p, {})
+    ix, iy, a = data_channels(*args, p, LevelState())
     assert ix.shape == iy.shape == a.shape == (9, 40, 48)
     _, _, i1x, i1y, inside, _ = args
     i0x, i0y = image_derivatives(f0)
@@ -106,8 +107,8 @@ def test_gradient_term_ignores_an_additive_brightness_offset():
     brighter = (f1 + 0.05).astype(np.float32)  # not clipped: the channels take any values
     p = PlainTVL1Params(gradient_weight=40.0, gradient_sigma=0.0)
     gt = gt.astype(np.float32)
-    _, _, a = data_channels(*warped_inputs(f0, f1, gt), p, {})
-    _, _, b = data_channels(*warped_inputs(f0, brighter, gt), p, {})
+    _, _, a = data_channels(*warped_inputs(f0, f1, gt), p, LevelState())
+    _, _, b = data_channels(*warped_inputs(f0, brighter, gt), p, LevelState())
     np.testing.assert_allclose(a[1:], b[1:], atol=1e-5)  # gradient channels: unchanged
     assert np.abs(b[0] - a[0]).mean() > 0.04  # the colour channel sees the offset
 
@@ -116,8 +117,8 @@ def test_normalised_channels_have_gradients_below_one():
     f0, f1, gt = synthetic_pair("smooth", shape=(40, 48), magnitude=1.5, channels=3, seed=2)
     args = warped_inputs(f0, f1, np.zeros_like(gt))
     p = PlainTVL1Params(data_weight=2.0, gradient_weight=6.0, data_normalisation=0.05)
-    ix, iy, a = data_channels(*args, p, {})
-    plain = data_channels(*args, p.replace(data_normalisation=0.0), {})
+    ix, iy, a = data_channels(*args, p, LevelState())
+    plain = data_channels(*args, p.replace(data_normalisation=0.0), LevelState())
     w = np.array([1.0] * 3 + [3.0] * 6)[:, None, None]  # channel weights γ/λ
     nrm = np.sqrt(ix**2 + iy**2) / w
     assert nrm.max() < 1.0 and nrm.max() > 0.9  # |∇ρ| / sqrt(|∇ρ|² + ζ²)
@@ -132,8 +133,8 @@ def test_gradient_sigma_follows_the_pyramid_level():
     f0, f1, gt = synthetic_pair("smooth", shape=(40, 48), magnitude=1.5, channels=1, seed=2)
     args = warped_inputs(f0, f1, np.zeros_like(gt))
     p = PlainTVL1Params(gradient_weight=10.0, gradient_sigma=2.0, scale_factor=0.5)
-    at_level_1 = data_channels(*args, p, {"level": 1})
-    sigma_1 = data_channels(*args, p.replace(gradient_sigma=1.0), {"level": 0})
+    at_level_1 = data_channels(*args, p, LevelState(level=1))
+    sigma_1 = data_channels(*args, p.replace(gradient_sigma=1.0), LevelState(level=0))
     for x, y in zip(at_level_1, sigma_1, strict=True):
         np.testing.assert_array_equal(x, y)
 
@@ -156,15 +157,15 @@ def test_data_channel_engines_agree(extra, level):
     args = warped_inputs(f0, f1, (0.7 * gt).astype(np.float32))
     assert 0 < args[4].sum() < args[4].size  # some points leave the frame
     params = PlainTVL1Params(**extra)
-    s_fast: dict = {"level": level}
-    s_ref: dict = {"level": level}
+    s_fast = LevelState(level=level)
+    s_ref = LevelState(level=level)
     got = data_channels(*args, params, s_fast)
     want = data_channels_numpy(*args, params, s_ref)
     scale = max(float(np.abs(w).max()) for w in want)
     for g, w in zip(got, want, strict=True):
         assert g.shape == w.shape and g.dtype == np.float32 and g.flags.c_contiguous
         np.testing.assert_allclose(g, w, atol=1e-6 * scale)
-    assert s_fast.keys() == s_ref.keys()
+    assert (s_fast.grad0 is None) == (s_ref.grad0 is None)
 
 
 @pytest.mark.parametrize("extra", [
@@ -181,7 +182,7 @@ def test_numba_and_numpy_engines_agree(extra):
     params = PlainTVL1Params(max_iterations=40, tolerance=0.0, edge_weight=5.0, **extra)
     outs, states = [], []
     for engine in ("numba", "numpy"):
-        state: dict = {}
+        state = LevelState()
         for _ in range(2):  # the second warp warm starts every dual variable
             out = solve_warp(*args, params, state, engine=engine)
         outs.append(out)
@@ -191,14 +192,14 @@ def test_numba_and_numpy_engines_agree(extra):
     assert aee(outs[0], flow0) > 0.05  # the solver moved
     n_extra = 6 if extra.get("gradient_weight") else 0
     for s in states:
-        assert s["q"].shape == (3, 48, 56)
-        assert (s.get("q_all") is None) == (n_extra == 0)
-        if n_extra:  # one array for every channel's dual; state["q"] is a view of it
-            assert s["q_all"].shape == (3 + n_extra, 48, 56)
-            assert np.shares_memory(s["q"], s["q_all"])
-            assert np.abs(s["q_all"][3:]).max() > 0
+        assert s.q.shape == (3, 48, 56)
+        assert (s.q_all is None) == (n_extra == 0)
+        if n_extra:  # one array for every channel's dual; state.q is a view of it
+            assert s.q_all.shape == (3 + n_extra, 48, 56)
+            assert np.shares_memory(s.q, s.q_all)
+            assert np.abs(s.q_all[3:]).max() > 0
     if n_extra:
-        np.testing.assert_allclose(states[0]["q_all"], states[1]["q_all"], atol=2e-3)
+        np.testing.assert_allclose(states[0].q_all, states[1].q_all, atol=2e-3)
 
 
 # ------------------------------------------------------------------ accuracy
@@ -290,16 +291,17 @@ def test_grey_gradient_term_is_two_channels_of_the_channel_mean():
     f0, f1, gt = synthetic_pair("smooth", shape=(41, 53), magnitude=2.5, channels=3, seed=9)
     args = warped_inputs(f0, f1, (0.7 * gt).astype(np.float32))
     grey = PlainTVL1Params(gradient_weight=30.0, gradient_grey=True)
-    ix, iy, a = data_channels(*args, grey, {})
+    ix, iy, a = data_channels(*args, grey, LevelState())
     assert ix.shape[0] == 3 + 2
     # the same as the colour term's gradient channels of the mean image, weighted 3x
     mean = [np.repeat(x.mean(2, keepdims=True), 1, 2) for x in args[:4]]
-    one = data_channels(*mean, *args[4:], PlainTVL1Params(gradient_weight=90.0), {})
+    one = data_channels(*mean, *args[4:], PlainTVL1Params(gradient_weight=90.0), LevelState())
     for got, want in zip((ix, iy, a), one, strict=True):
         np.testing.assert_allclose(got[3:], want[1:], atol=1e-6)
     # on a grey image the option changes nothing
     g = [x[..., :1] for x in args[:4]]
-    for got, want in zip(data_channels(*g, *args[4:], grey, {}),
-                         data_channels(*g, *args[4:], PlainTVL1Params(gradient_weight=30.0), {}),
+    for got, want in zip(data_channels(*g, *args[4:], grey, LevelState()),
+                         data_channels(*g, *args[4:], PlainTVL1Params(gradient_weight=30.0),
+                                       LevelState()),
                          strict=True):
         np.testing.assert_array_equal(got, want)

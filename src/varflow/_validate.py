@@ -29,10 +29,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_float_frames", "as_float_image", "check_flow", "check_pair"]
+__all__ = ["as_float_frames", "as_float_image", "check_field", "check_flow", "check_pair"]
 
 #: Float frames within ``[-_FLOAT_TOL, 1 + _FLOAT_TOL]`` are taken as already in [0, 1].
 _FLOAT_TOL = 1e-3
+
+
+def check_field(cond: bool, field: str, msg: str) -> None:
+    """Raise ``ValueError("field: msg")`` unless ``cond`` (the parameter classes' checks)."""
+    if not cond:
+        raise ValueError(f"{field}: {msg}")
 
 
 def _as_hwc(image: object, name: str) -> np.ndarray:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..twoframe.coarse_to_fine import _check
+from .._validate import check_field as _check
 from .lowrank import matrix_to_trajectories, trajectories_to_matrix
 from .rlr import Coupling, MultiFrameParams, refine_trajectories
 from .track import TrackCallback

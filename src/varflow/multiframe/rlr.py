@@ -112,8 +112,19 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._validate import check_field as _check
 from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import noise_sigma, repair, repair_margin, support_weights
+from ..ops.primal_dual import (
+    F0,
+    F1,
+    NO_TENSOR,
+    data_prox_row,
+    dual_row,
+    ordered_sum,
+    primal_row,
+    row_blocks,
+)
 from ..ops.prox import (
     project_l2_ball,
     prox_huber_conjugate,
@@ -124,27 +135,19 @@ from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import (
     CoarseToFineParams,
-    _check,
+    LevelState,
     coarse_to_fine_pyramids,
-    filter_flow,
     guide_pyramid,
     noise_adapted,
+    run_levels,
     working_channels,
 )
 from ..twoframe.methods import DEFAULT_METHOD, METHODS
 from ..twoframe.tvl1 import (
-    _F0,
-    _F1,
-    _NO_TENSOR,
     TVL1Params,
-    _data_prox_row,
-    _dual_row,
-    _gradient_channels,
-    _ordered_sum,
-    _primal_row,
-    _row_blocks,
     data_channels,
     edge_weight,
+    gradient_channel_count,
 )
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .lowrank import lowrank_step, matrix_to_trajectories, trajectories_to_matrix
@@ -808,7 +811,7 @@ def _prox_certified_kernel(u, a, ix, iy, q, t, n_sweeps, out, fallbacks):
         d2 = out[1, i]
         d1[:] = u[0, i]
         d2[:] = u[1, i]
-        _data_prox_row(ix, iy, a, q, i, d1, d2, np.float32(t), n_sweeps)
+        data_prox_row(ix, iy, a, q, i, d1, d2, np.float32(t), n_sweeps)
         fallbacks[i] = _certify_row(ix, iy, a, q, i, u[0, i], u[1, i], d1, d2, t,
                                     np.empty((4, nk), np.float64))
 
@@ -966,13 +969,13 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
     for j in range(w):
         o1[j] = u[0, i, j]
         o2[j] = u[1, i, j]
-    _primal_row(u, p, i, 0, o1, s)  # u = old + s div p (reads p only)
-    _primal_row(u, p, i, 1, o2, s)
+    primal_row(u, p, i, 0, o1, s)  # u = old + s div p (reads p only)
+    primal_row(u, p, i, 1, o2, s)
     d1 = u[0, i]
     d2 = u[1, i]
-    if beta > _F0:
+    if beta > F0:
         sb = s * beta
-        c = _F1 / (_F1 + sb)
+        c = F1 / (F1 + sb)
         m1 = m[0, i]
         m2 = m[1, i]
         for j in range(w):
@@ -985,10 +988,10 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
         for j in range(w):
             b1[j] = d1[j]
             b2[j] = d2[j]
-    _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
+    data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
     if exact:  # certify the active set the dual descent found (see prox_certified)
         _certify_row(ix, iy, a, q, i, b1, b2, d1, d2, t, sc)
-    err = _F0
+    err = F0
     for j in range(w):
         e1 = d1[j] - o1[j]
         e2 = d2[j] - o2[j]
@@ -1000,7 +1003,7 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
 
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol, n_sweeps,
-                     exact, blocks, huber=_F0):
+                     exact, blocks, huber=F0):
     """Numba primal-dual (Condat / Chambolle-Pock) iterations of one frame's U-step.
 
     Minimises ``λ Σ_k |a_k + (ix_k, iy_k)·u| + Σ_x g (|∇u_1| + |∇u_2|)`` (the data and
@@ -1050,7 +1053,7 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
     """
     nk, h, w = a.shape
     t = lam * s
-    sigma = _F1 / (np.float32(8.0) * s)
+    sigma = F1 / (np.float32(8.0) * s)
     tol2 = tol * tol
     n_blk = blocks.shape[0] - 1
     errs = np.zeros(h, np.float64)  # per row: the stopping test does not depend on blocks
@@ -1065,8 +1068,8 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
                                             t, n_sweeps, exact, sc[b])
         for b in nb.prange(n_blk):
             for i in range(blocks[b], blocks[b + 1]):
-                _dual_row(ubar, p, p, g, _NO_TENSOR, i, sigma, False, huber)
-        if _ordered_sum(errs) / (h * w) < tol2:
+                dual_row(ubar, p, p, g, NO_TENSOR, i, sigma, False, huber)
+        if ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
@@ -1257,7 +1260,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
 
 def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
                       visible: np.ndarray | None, hidden_data_weight: float,
-                      link_ratio: Any, energy: TVL1Params, level_state: dict) -> tuple:
+                      link_ratio: Any, energy: TVL1Params, level_state: LevelState) -> tuple:
     """One frame's data term linearised about ``about`` (and its link channels).
 
     The channels of the two-frame energy, built by TV-L1's own
@@ -1266,8 +1269,8 @@ def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
     data term of ``tvl1``.  Built when the frame's U-step needs it, so that the
     warped planes of all frames are never held at once.  ``visible`` (H, W) bool or
     None; ``link_ratio`` None (no l1 link) or the link-to-data ratio (scalar or
-    (H, W)); ``level_state`` the level's dict shared by the frames (it caches the
-    reference's smoothed gradients).
+    (H, W)); ``level_state`` TV-L1's level state shared by the frames (it caches
+    the reference's smoothed gradients).
     """
     n_ch = i0.shape[2]
     warped, inside = warp_bicubic(derivative_planes(i1), about)
@@ -1306,20 +1309,165 @@ def clip_noise_rule(params: MultiFrameParams, frames: np.ndarray, ref: int,
     return params if out is energy else replace(params, flow_params=out)
 
 
+@dataclass
+class MultiFrameLevel:
+    """The state of one pyramid level of the multi-frame refinement (:class:`_UStep`).
+
+    Attributes
+    ----------
+    level : int
+        Pyramid level, 0 = finest.
+    i0 : ndarray, shape (h, w, C), float32
+        The reference frame at the level (pre-processed, working channels).
+    g : ndarray, shape (h, w), float32
+        ``λ_TV g(x)``: the radius of the TV dual ball.
+    p : ndarray, shape (F, 4, h, w), float32
+        Every frame's TV dual variables, warm started from the coarser level.
+    visible : ndarray, shape (F, h, w), bool, or None
+        The visibility at the level.
+    link, link_adjacent : float or ndarray (h, w), float32
+        The link-to-data ratio ``τ/λ_D`` of the visible entries, of the frames
+        further from the reference and of ``ref ± 1``.
+    hidden_link, hidden_link_adjacent : float32
+        Likewise for the hidden entries.
+    blocks : ndarray, shape (n+1,), int64
+        Row blocks of the kernels (:func:`varflow.ops.primal_dual.row_blocks`).
+    ubar : ndarray, shape (2, h, w), float32
+        Scratch of the U-step kernel.
+    data : LevelState
+        TV-L1's data-term cache of the level (the reference's smoothed gradients),
+        shared by the frames.
+    q : ndarray, shape (F, K, h, w), float32, or None
+        Every frame's data-prox duals (made at the level's first U-step, when the
+        number of channels ``K`` is known).
+    """
+
+    level: int
+    i0: np.ndarray
+    g: np.ndarray
+    p: np.ndarray
+    visible: np.ndarray | None
+    link: Any
+    link_adjacent: Any
+    hidden_link: np.float32
+    hidden_link_adjacent: np.float32
+    blocks: np.ndarray
+    ubar: np.ndarray
+    data: LevelState
+    q: np.ndarray | None = None
+
+
+class _UStep:
+    """The level set-up and the warp step of the multi-frame refinement, for
+    :func:`varflow.twoframe.coarse_to_fine.run_levels`.
+
+    A warp re-linearises every frame's data term about its displacement at the
+    start of the warp and alternates ``params.alternations`` times the coupling
+    target ``T = coupling.target(U, visible)`` with the per-frame primal-dual U-step
+    coupled to ``T`` (see :func:`refine_trajectories`).
+    """
+
+    def __init__(self, pyrs, ref, others, params, coupling, visible, kernel, exact, l1,
+                 weight, w_hidden, a_adj):
+        self.pyrs, self.ref, self.others = pyrs, ref, others
+        self.params, self.coupling, self.visible = params, coupling, visible
+        self.kernel, self.exact, self.l1 = kernel, exact, l1
+        self.weight, self.w_hidden, self.a_adj = weight, w_hidden, a_adj
+        self.energy = params.flow_params
+        self.n_frames = len(pyrs)
+        self.seconds = 0.0  # U-step time (with each frame's warp and linearisation)
+
+    def start_level(self, level: int, traj: np.ndarray,
+                    previous: MultiFrameLevel | None) -> MultiFrameLevel:
+        params, energy, n_frames = self.params, self.energy, self.n_frames
+        h, w = traj.shape[1:3]
+        vis_l = None if self.visible is None else np.stack(
+            [_level_mask(self.visible[n], (h, w)) for n in range(n_frames)])
+        i0 = self.pyrs[self.ref][level]
+        g = edge_weight(i0, energy.edge_weight, energy.edge_weight_min)
+        g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
+        if previous is None:
+            p = np.zeros((n_frames, 4, h, w), np.float32)
+        else:
+            p = np.stack([_resize_dual(previous.p[n], (h, w), g) for n in range(n_frames)])
+        link, link_adj = (_link_ratio(wt, params, g, self.coupling.edge_scaled)
+                          for wt in (self.weight, self.a_adj * self.weight))
+        lam = float(energy.data_weight)
+        return MultiFrameLevel(
+            level=level, i0=i0, g=g, p=p, visible=vis_l, link=link, link_adjacent=link_adj,
+            hidden_link=np.float32(self.w_hidden / lam),
+            hidden_link_adjacent=np.float32(self.a_adj * self.w_hidden / lam),
+            blocks=row_blocks(h), ubar=np.empty((2, h, w), np.float32),
+            data=LevelState(level=level))
+
+    def warp(self, st: MultiFrameLevel, traj: np.ndarray, k: int) -> np.ndarray:
+        params, energy, coupling, l1 = self.params, self.energy, self.coupling, self.l1
+        lam = np.float32(energy.data_weight)
+        s = np.float32(params.primal_step)
+        beta = np.float32(self.weight if coupling.kind == "l2" else 0.0)
+        huber = np.float32(energy.huber)
+        no_target = np.zeros((2, 1, 1), np.float32)
+        vis_l = st.visible
+        # every alternation linearises about the flow at the start of the warp
+        start = traj.copy() if params.alternations > 1 else traj
+        for _a in range(params.alternations):
+            t0 = time.perf_counter()
+            target = coupling.target(traj, vis_l) if (self.weight > 0 or l1) else None
+            gate = None
+            if l1 and target is not None and coupling.gate is not None:
+                gate = coupling.gate(traj, target, vis_l)
+            t1 = time.perf_counter()
+            coupling.seconds += t1 - t0
+            for n in self.others:  # U-step with the target fixed, frame by frame
+                # (with one alternation traj[n] is still the flow of the warp's start)
+                vis_n = None if vis_l is None else vis_l[n]
+                adjacent = abs(n - self.ref) == 1
+                rn = st.link_adjacent if adjacent else st.link
+                if gate is not None:  # the visible entries' link follows the fit
+                    rn = (rn * gate).astype(np.float32)
+                if l1 and vis_n is not None and (self.w_hidden != self.weight
+                                                 or gate is not None):
+                    rn = np.where(vis_n, rn,
+                                  st.hidden_link_adjacent if adjacent else st.hidden_link)
+                    rn = rn.astype(np.float32)
+                ix, iy, a = _linearised_frame(st.i0, self.pyrs[n][st.level], start[n], vis_n,
+                                              params.hidden_data_weight,
+                                              rn if l1 else None, energy, st.data)
+                n_data = a.shape[0] - (2 if l1 else 0)
+                tk = None if target is None else np.ascontiguousarray(
+                    np.moveaxis(target[n], -1, 0))
+                if l1 and tk is not None:
+                    set_link_targets(a, n_data, tk, rn)
+                m = tk if (tk is not None and not l1) else no_target
+                u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
+                if st.q is None:  # the data channels' count is known now
+                    st.q = np.zeros((self.n_frames,) + a.shape, np.float32)
+                self.kernel(ix, iy, a, st.g, u, st.p[n], st.q[n], st.ubar, m, beta, lam, s,
+                            params.ustep_iterations, np.float32(params.ustep_tolerance),
+                            energy.data_sweeps, self.exact, st.blocks, huber)
+                traj[n] = np.moveaxis(u, 0, -1)
+            self.seconds += time.perf_counter() - t1
+        return traj
+
+
 def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
                         coupling: Coupling, callback: TrackCallback | None = None,
                         engine: str = "numba", stats: dict | None = None,
                         pyramids: list[list[np.ndarray]] | None = None) -> np.ndarray:
-    """The multi-frame coarse-to-fine driver shared by RLR and MFSF.
+    """The multi-frame refinement shared by RLR and MFSF.
 
     Builds every frame's pyramid once, initialises (``params.init``), estimates the
-    visibility of the initial trajectories (``params.visibility``), then on the
-    finest ``params.refine_levels`` levels (every level from zero motion), for
-    every warp: re-warps every frame around its current displacement, linearises
-    its data term (switched off where the point is hidden or leaves the frame),
-    and alternates ``params.alternations`` times the coupling target
-    ``T = coupling.target(U, visible)`` with the per-frame primal-dual U-step
-    coupled to ``T``; a median filter follows each warp.
+    visibility of the initial trajectories (``params.visibility``), then runs the
+    two-frame driver's level and warp loop
+    (:func:`varflow.twoframe.coarse_to_fine.run_levels`) on the ``F`` displacement
+    fields over the finest ``params.refine_levels`` levels (every level from zero
+    motion).  Every warp re-warps every frame around its current displacement,
+    linearises its data term with TV-L1's own
+    :func:`~varflow.twoframe.tvl1.data_channels` (switched off where the point is
+    hidden or leaves the frame), and alternates ``params.alternations`` times the
+    coupling target ``T = coupling.target(U, visible)`` with the per-frame
+    primal-dual U-step coupled to ``T``; the driver's filters (median, weighted
+    median) follow each warp.  The per-level state is a :class:`MultiFrameLevel`.
 
     Parameters
     ----------
@@ -1369,7 +1517,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         n_run = min(params.refine_levels, n_levels)
     n_init = len(others) if params.init != "zero" else 0
     n_vis = len(others) if params.visibility else 0
-    total = n_init + n_vis + n_run * energy.n_warps
+    n_warps = sum(energy.level_warps(shp) for shp in shapes[:n_run])
+    total = n_init + n_vis + n_warps
     done = 0
 
     def tick(*_: Any) -> None:
@@ -1391,89 +1540,24 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         visible = visibility_from(init, back, ref, [p[0] for p in pyrs], vparams)
         stats["visibility_seconds"] = time.perf_counter() - t0
 
-    lam = np.float32(energy.data_weight)
-    s = np.float32(params.primal_step)
     weight = float(coupling.weight)
     w_hidden = weight if coupling.hidden_weight is None else float(coupling.hidden_weight)
     a_adj = float(coupling.adjacent_factor)
     l1 = coupling.kind == "l1" and (weight > 0 or (visible is not None and w_hidden > 0))
-    beta = np.float32(weight if coupling.kind == "l2" else 0.0)
     n_work = pyrs[ref][0].shape[2]  # the channels the energy works on (1 with grey)
-    n_terms = n_work + 2 * _gradient_channels(energy, n_work)  # channels of the data term
+    n_terms = n_work + 2 * gradient_channel_count(energy, n_work)  # channels of the data term
     exact = params.data_prox == "exact" or (params.data_prox == "auto" and n_terms == 1)
-    huber = np.float32(energy.huber)
     kernel = ustep_iterations if engine == "numba" else ustep_iterations_numpy
-    t_u = 0.0
     coupling.seconds = 0.0
 
     traj = np.stack([resize_flow(init[n], shapes[n_run - 1]) for n in range(n_frames)])
     del init  # not needed again; one (F, H, W, 2) array less at the peak
-    p_all: np.ndarray | None = None
     guide = guide_pyramid(working_channels(frames[ref], energy), energy, shapes)
-    for level in range(n_run - 1, -1, -1):
-        h, w = shapes[level]
-        if traj.shape[1:3] != (h, w):
-            traj = np.stack([resize_flow(traj[n], (h, w)) for n in range(n_frames)])
-        vis_l = None if visible is None else np.stack(
-            [_level_mask(visible[n], (h, w)) for n in range(n_frames)])
-        i0 = pyrs[ref][level]
-        g = edge_weight(i0, energy.edge_weight, energy.edge_weight_min)
-        g = np.ascontiguousarray(g * np.float32(params.tv_weight), np.float32)
-        if p_all is None:
-            p_all = np.zeros((n_frames, 4, h, w), np.float32)
-        else:
-            p_all = np.stack([_resize_dual(p_all[n], (h, w), g) for n in range(n_frames)])
-        blocks = _row_blocks(h)
-        ubar = np.empty((2, h, w), np.float32)
-        no_target = np.zeros((2, 1, 1), np.float32)
-        ratio_map, adj_map = (_link_ratio(wt, params, g, coupling.edge_scaled)
-                              for wt in (weight, a_adj * weight))
-        r_hid = np.float32(w_hidden / float(energy.data_weight))
-        r_hid_adj = np.float32(a_adj * w_hidden / float(energy.data_weight))
-        q_all: np.ndarray | None = None
-        level_state: dict = {"level": level}  # TV-L1's per-level cache (grad0)
-        for _k in range(energy.n_warps):
-            # every alternation linearises about the flow at the start of the warp
-            start = traj.copy() if params.alternations > 1 else traj
-            for _a in range(params.alternations):
-                t0 = time.perf_counter()
-                target = coupling.target(traj, vis_l) if (weight > 0 or l1) else None
-                gate = None
-                if l1 and target is not None and coupling.gate is not None:
-                    gate = coupling.gate(traj, target, vis_l)
-                t1 = time.perf_counter()
-                coupling.seconds += t1 - t0
-                for n in others:  # U-step with the target fixed, frame by frame
-                    # (with one alternation traj[n] is still the flow of the warp's start)
-                    vis_n = None if vis_l is None else vis_l[n]
-                    adjacent = abs(n - ref) == 1
-                    rn = adj_map if adjacent else ratio_map
-                    if gate is not None:  # the visible entries' link follows the fit
-                        rn = (rn * gate).astype(np.float32)
-                    if l1 and vis_n is not None and (w_hidden != weight or gate is not None):
-                        rn = np.where(vis_n, rn, r_hid_adj if adjacent else r_hid)
-                        rn = rn.astype(np.float32)
-                    ix, iy, a = _linearised_frame(i0, pyrs[n][level], start[n], vis_n,
-                                                  params.hidden_data_weight,
-                                                  rn if l1 else None, energy, level_state)
-                    n_data = a.shape[0] - (2 if l1 else 0)
-                    tk = None if target is None else np.ascontiguousarray(
-                        np.moveaxis(target[n], -1, 0))
-                    if l1 and tk is not None:
-                        set_link_targets(a, n_data, tk, rn)
-                    m = tk if (tk is not None and not l1) else no_target
-                    u = np.ascontiguousarray(np.moveaxis(traj[n], -1, 0))
-                    if q_all is None:  # the data channels' count is known now
-                        q_all = np.zeros((n_frames,) + a.shape, np.float32)
-                    kernel(ix, iy, a, g, u, p_all[n], q_all[n], ubar, m, beta, lam, s,
-                           params.ustep_iterations, np.float32(params.ustep_tolerance),
-                           energy.data_sweeps, exact, blocks, huber)
-                    traj[n] = np.moveaxis(u, 0, -1)
-                t_u += time.perf_counter() - t1
-            for n in others:
-                traj[n] = filter_flow(traj[n], energy, None if guide is None else guide[level],
-                                      last_warp=_k == energy.n_warps - 1, level=level)
-            tick()
+    ustep = _UStep(pyrs, ref, others, params, coupling, visible, kernel, exact, l1, weight,
+                   w_hidden, a_adj)
+    traj = run_levels(traj, shapes[:n_run], energy, ustep.start_level, ustep.warp,
+                      guide=None if guide is None else guide[:n_run], active=others, tick=tick)
+    t_u = ustep.seconds
     traj[ref] = 0.0
     if params.final_repair:
         weights = support_weights(frames[ref])
@@ -1485,7 +1569,7 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     if back is not None:
         visible = visibility_from(traj, back, ref, [p[0] for p in pyrs],
                                   params.visibility_params())
-    stats.update(levels=n_run, warps=n_run * energy.n_warps, ustep_seconds=t_u,
+    stats.update(levels=n_run, warps=n_warps, ustep_seconds=t_u,
                  coupling_seconds=coupling.seconds, seconds=time.perf_counter() - t_start,
                  visible=visible)
     log.debug("multi-frame refinement: %d levels, U-step %.2fs, coupling %.2fs", n_run, t_u,

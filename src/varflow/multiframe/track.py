@@ -32,8 +32,9 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_float_frames
+from .._validate import check_field as _check
 from ..ops.warp import warp_bicubic
-from ..twoframe.coarse_to_fine import CoarseToFineParams, _check
+from ..twoframe.coarse_to_fine import CoarseToFineParams
 from ..twoframe.methods import DEFAULT_METHOD, METHODS, run_method
 
 __all__ = [

@@ -43,9 +43,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .._validate import check_field as _check
 from ..ops.fusion import flow_cost, fuse, support_weights
 from ..ops.warp import in_bounds, warp_bicubic
-from ..twoframe.coarse_to_fine import _check, coarse_to_fine_pyramids
+from ..twoframe.coarse_to_fine import coarse_to_fine_pyramids
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 
 __all__ = [

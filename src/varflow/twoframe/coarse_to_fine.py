@@ -9,10 +9,18 @@ and the upsampling of the flow between levels.  A method plugs in a *warp solver
     solve_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state) -> flow
 
 that minimises its energy linearised around ``flow0`` at one pyramid level;
-``state`` is a dict that lives for one level (dual variables, edge weights…);
-``state["previous"]`` holds the state of the coarser level, so a solver can warm
-start its dual variables across levels, and ``state["warp"]`` is the index of the
-current warp at this level (``params.level_warps(shape)`` warps per level).
+``state`` is the :class:`LevelState` that lives for one level (dual variables,
+edge weights…); ``state.previous`` holds the state of the coarser level, so a
+solver can warm start its dual variables across levels, and ``state.warp`` is the
+index of the current warp at this level (``params.level_warps(shape)`` warps per
+level).
+
+The level and warp loop itself is :func:`run_levels`: it carries a stack of flows
+through the levels (upsampling between them), calls a per-level set-up and a
+per-warp step, and filters every flow after each warp.  The two-frame driver runs it
+on one flow; the multi-frame refinement of :mod:`varflow.multiframe.rlr` (RLR and
+MFSF) on the ``F`` displacement fields of a clip, with its own warp step (the
+coupled U-step) and typed level state.
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._validate import check_pair
+from .._validate import check_field, check_pair
 from ..ops.differences import derivative_planes
 from ..ops.fusion import noise_sigma_flat
 from ..ops.median import median_filter_flow, weighted_median_flow
@@ -38,7 +46,9 @@ from ..ops.warp import warp_bicubic
 
 __all__ = [
     "CoarseToFineParams",
+    "LevelState",
     "WarpSolver",
+    "run_levels",
     "coarse_to_fine",
     "coarse_to_fine_pyramids",
     "prepare_pyramid",
@@ -48,6 +58,8 @@ __all__ = [
     "noise_adapted",
     "ProgressCallback",
     "LevelHook",
+    "LevelStart",
+    "WarpStep",
 ]
 
 log = logging.getLogger(__name__)
@@ -62,9 +74,7 @@ ProgressCallback = Callable[[int, int], None]
 LevelHook = Callable[[int, np.ndarray, np.ndarray, np.ndarray, dict], np.ndarray]
 
 
-def _check(cond: bool, field: str, msg: str) -> None:
-    if not cond:
-        raise ValueError(f"{field}: {msg}")
+_check = check_field  # the twoframe modules' short name
 
 
 @dataclass(frozen=True)
@@ -234,9 +244,67 @@ class CoarseToFineParams:
 
         Methods whose levels have extra stages (e.g. the sparse stage of
         :mod:`varflow.twoframe.sparse`) override it; the driver tells the solver
-        which warp it is in ``state["warp"]``.
+        which warp it is in ``state.warp``.
         """
         return self.n_warps
+
+
+@dataclass
+class LevelState:
+    """What a warp solver keeps for one pyramid level (a new one per level).
+
+    The driver sets ``level``, ``warp``, ``previous`` and ``stats``; the solvers of
+    the TV-L1 family fill the rest on the level's first warp
+    (:func:`varflow.twoframe.tvl1.init_level_state`) and update them in place.
+
+    Attributes
+    ----------
+    level : int
+        Pyramid level, 0 = finest.
+    stats : dict
+        The run's statistics (the ``stats`` of :func:`coarse_to_fine`), for a
+        solver to record counters and seconds in.
+    previous : LevelState or None
+        The coarser level's state (its own ``previous`` dropped), for warm starts.
+    warp : int
+        Index of the current warp at this level.
+    iterations : int
+        Primal-dual iterations run at this level so far.
+    g : ndarray, shape (h, w), float32, or None
+        Radius of the TV dual ball: the edge weight g(x).
+    tensor : ndarray, shape (3, h, w), float32, or None
+        ``T = D^{1/2}`` as (T11, T12, T22) of tensor-directed TV; None: isotropic.
+    p, tp : ndarray, shape (4, h, w), float32, or None
+        TV dual variables (p1x, p1y, p2x, p2y) and ``T p`` (``tp is p`` when isotropic).
+    q : ndarray, shape (C, h, w), float32, or None
+        Dual variables of the data prox's colour channels (warm started across warps).
+    q_all : ndarray, shape (K, h, w), float32, or None
+        The data prox's duals of every channel when the data term has more than the
+        colour channels (``q`` is then a view of its first planes).
+    grad0 : ndarray or tuple or None
+        The smoothed derivatives of the first frame for gradient constancy
+        (:func:`varflow.twoframe.tvl1.data_channels`).
+    dictionaries : list or None
+        The sparse regulariser's dictionaries at this level
+        (:mod:`varflow.twoframe.sparse`).
+    coverage : ndarray, shape (h, w), float32, or None
+        The sparse term's per-pixel weight.
+    """
+
+    level: int = 0
+    stats: dict = dataclasses.field(default_factory=dict)
+    previous: LevelState | None = None
+    warp: int = 0
+    iterations: int = 0
+    g: np.ndarray | None = None
+    tensor: np.ndarray | None = None
+    p: np.ndarray | None = None
+    tp: np.ndarray | None = None
+    q: np.ndarray | None = None
+    q_all: np.ndarray | None = None
+    grad0: Any = None
+    dictionaries: list | None = None
+    coverage: np.ndarray | None = None
 
 
 class WarpSolver(Protocol):
@@ -249,7 +317,7 @@ class WarpSolver(Protocol):
         inside: np.ndarray,
         flow0: np.ndarray,
         params: Any,
-        state: dict,
+        state: LevelState,
     ) -> np.ndarray: ...
 
 
@@ -385,7 +453,7 @@ def coarse_to_fine(
         ``seconds``, ``blur_sigma`` (with ``sharpness_match``: the σ of the
         Gaussian applied to each frame), what the parameters read off the frames
         (``noise_sigma`` and ``data_scale`` of TV-L1's noise rule) and whatever
-        the solver records (it sees the same dict as ``state["stats"]``, e.g. the
+        the solver records (it sees the same dict as ``state.stats``, e.g. the
         sparse method's ``sparse_seconds``).
     levels : int, optional
         Run only the finest ``levels`` pyramid levels (refining ``init_flow``);
@@ -460,41 +528,125 @@ def coarse_to_fine_pyramids(
     total = sum(params.level_warps(shp) for shp in shapes)
     done = 0
     if init_flow is not None:
-        flow = resize_flow(np.asarray(init_flow, np.float32), shapes[-1])
+        flows = np.array(init_flow, np.float32)[None]  # a copy: updated in place
     else:
-        flow = np.zeros(shapes[-1] + (2,), np.float32)
+        flows = np.zeros((1,) + shapes[-1] + (2,), np.float32)
     n_ch = pyr0[0].shape[2]
     stats = {} if stats is None else stats
-    state: dict = {}
-    for level in range(n_levels - 1, -1, -1):
-        i0, i1 = pyr0[level], pyr1[level]
-        if flow.shape[:2] != i0.shape[:2]:
-            flow = resize_flow(flow, i0.shape[:2])
+    planes: list[np.ndarray] = []  # the second frame's derivative planes at the level
+
+    def start_level(level: int, flows: np.ndarray, previous: LevelState | None) -> LevelState:
         if level_hook is not None:
-            flow = level_hook(level, i0, i1, flow, stats)
-        planes = derivative_planes(i1)
-        state = {"level": level, "previous": state, "stats": stats}
-        state["previous"].pop("previous", None)  # keep only one level of history
-        n_warps = params.level_warps(i0.shape[:2])
-        for k in range(n_warps):
-            state["warp"] = k
-            warped, inside = warp_bicubic(planes, flow)
-            flow = solve_warp(
-                i0,
-                warped[..., :n_ch],
-                warped[..., n_ch : 2 * n_ch],
-                warped[..., 2 * n_ch :],
-                inside,
-                flow,
-                params,
-                state,
-            )
-            flow = filter_flow(flow, params, guide[level] if guide is not None else i0,
-                               last_warp=k == n_warps - 1, level=level)
-            done += 1
-            if callback is not None:
-                callback(done, total)
+            flows[0] = level_hook(level, pyr0[level], pyr1[level], flows[0], stats)
+        planes[:] = [derivative_planes(pyr1[level])]
+        return LevelState(level=level, stats=stats, previous=previous)
+
+    def warp_step(state: LevelState, flows: np.ndarray, k: int) -> np.ndarray:
+        state.warp = k
+        warped, inside = warp_bicubic(planes[0], flows[0])
+        flows[0] = solve_warp(
+            pyr0[state.level],
+            warped[..., :n_ch],
+            warped[..., n_ch : 2 * n_ch],
+            warped[..., 2 * n_ch :],
+            inside,
+            flows[0],
+            params,
+            state,
+        )
+        return flows
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if callback is not None:
+            callback(done, total)
+
+    flows = run_levels(flows, shapes, params, start_level, warp_step,
+                       guide=guide if guide is not None else pyr0, tick=tick)
     seconds = time.perf_counter() - t_start
     stats.update(levels=n_levels, warps=total, seconds=seconds)
     log.debug("coarse_to_fine: %d levels, %d warps in %.3fs", n_levels, total, seconds)
-    return np.ascontiguousarray(flow, dtype=np.float32)
+    return np.ascontiguousarray(flows[0], dtype=np.float32)
+
+
+#: ``start_level(level, flows, previous) -> state``: set up a pyramid level (after the
+#: flows were brought to its size; it may change them in place, e.g. a level hook) and
+#: return the level's state; ``previous`` is the coarser level's state or None.
+LevelStart = Callable[[int, np.ndarray, Any], Any]
+
+#: ``warp_step(state, flows, k) -> flows``: warp ``k`` of the level: re-linearise about
+#: the current flows and solve the level's energy (in place or a new stack).
+WarpStep = Callable[[Any, np.ndarray, int], np.ndarray]
+
+
+def run_levels(
+    flows: np.ndarray,
+    shapes: list[tuple[int, int]],
+    params: CoarseToFineParams,
+    start_level: LevelStart,
+    warp_step: WarpStep,
+    guide: list[np.ndarray] | None = None,
+    active: list[int] | None = None,
+    tick: Callable[[], None] | None = None,
+) -> np.ndarray:
+    """The level and warp loop of coarse-to-fine warping, on a stack of flows.
+
+    For every level, coarsest first: the flows are brought to the level's size
+    (:func:`~varflow.ops.pyramid.resize_flow`, which scales the vectors),
+    ``start_level`` sets the level up, then ``params.level_warps(shape)`` times
+    ``warp_step`` runs one warp and every active flow is filtered
+    (:func:`filter_flow`: the median after every warp, the weighted median after a
+    level's last); ``tick`` follows each warp.  A level's state keeps the coarser
+    level's (``previous``) and no more: ``previous.previous`` is dropped.
+
+    The two-frame driver (:func:`coarse_to_fine_pyramids`) runs it on one flow, the
+    multi-frame refinement (:func:`varflow.multiframe.rlr.refine_trajectories`) on
+    the ``F`` displacement fields of a clip.
+
+    Parameters
+    ----------
+    flows : ndarray, shape (K, h, w, 2), float32
+        The initial flows, at any resolution (resized to the coarsest level run);
+        updated in place while they have a level's size.
+    shapes : list of (int, int)
+        The levels to run, finest first (the last is run first).
+    params : CoarseToFineParams
+        Warps per level and the filters.
+    start_level : callable
+        :data:`LevelStart`.
+    warp_step : callable
+        :data:`WarpStep`.
+    guide : list of ndarray, each (h, w, C), optional
+        Per level, the image that guides the weighted median; None: no weighted
+        median.
+    active : list of int, optional
+        The flows that are filtered (default all; e.g. not a reference frame's
+        zero displacement).
+    tick : callable, optional
+        Called after every warp.
+
+    Returns
+    -------
+    ndarray, shape (K, H, W, 2), float32
+        The flows at the finest level run (``shapes[0]``).
+    """
+    flows = np.asarray(flows, np.float32)
+    rows = list(range(flows.shape[0])) if active is None else list(active)
+    state: Any = None
+    for level in range(len(shapes) - 1, -1, -1):
+        shape = tuple(shapes[level])
+        if flows.shape[1:3] != shape:
+            flows = np.stack([resize_flow(f, shape) for f in flows])
+        if state is not None and hasattr(state, "previous"):
+            state.previous = None  # keep one level of history
+        state = start_level(level, flows, state)
+        n_warps = params.level_warps(shape)
+        for k in range(n_warps):
+            flows = warp_step(state, flows, k)
+            for n in rows:
+                flows[n] = filter_flow(flows[n], params, None if guide is None else guide[level],
+                                       last_warp=k == n_warps - 1, level=level)
+            if tick is not None:
+                tick()
+    return flows

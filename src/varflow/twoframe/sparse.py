@@ -65,6 +65,7 @@ import numba as nb
 import numpy as np
 
 from ..ops.differences import divergence, gradient
+from ..ops.primal_dual import EPS_GRAD, dual_row, ordered_sum, primal_row, row_blocks
 from ..ops.prox import prox_huber_conjugate
 from ..sparse import (
     PatchGrid,
@@ -76,16 +77,11 @@ from ..sparse import (
     reconstruct,
     split_problems,
 )
-from .coarse_to_fine import _check
+from .coarse_to_fine import LevelState, _check
 from .tensor import FULL_ENERGY_TENSOR_A, TensorFields, init_tensor_level
 from .tvl1 import (
-    _EPS_GRAD,
     PlainTVL1Params,
     TVL1Params,
-    _dual_row,
-    _ordered_sum,
-    _primal_row,
-    _row_blocks,
     data_channels,
     data_duals,
     edge_weight,
@@ -733,7 +729,7 @@ def _continuation(mu: float, stages: int) -> np.ndarray:
 
 @nb.njit(cache=True, fastmath=True, error_model="numpy")
 def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
-    """:func:`varflow.twoframe.tvl1._data_prox_row` with a per-pixel step ``tr[j]``.
+    """:func:`varflow.ops.primal_dual.data_prox_row` with a per-pixel step ``tr[j]``.
 
     In place on ``d1, d2`` (on entry the prox centre, on exit
     ``d - t Σ_c q_c ∇I_c``) and on the row ``i`` of ``q``.
@@ -763,7 +759,7 @@ def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
                 e2 = d2[j] + qo * gy
                 nn = gx * gx + gy * gy
                 r = ar[j] + gx * e1 + gy * e2
-                qn = r / (t * nn) if nn >= _EPS_GRAD else _F0
+                qn = r / (t * nn) if nn >= EPS_GRAD else _F0
                 qn = min(max(qn, -_F1), _F1)
                 qr[j] = qn
                 d1[j] = e1 - t * qn * gx
@@ -799,7 +795,7 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
     max_iter, n_sweeps : int
     aniso : bool
     blocks : (n+1,) int64
-        Row-block bounds from :func:`~varflow.twoframe.tvl1._row_blocks`.
+        Row-block bounds from :func:`~varflow.ops.primal_dual.row_blocks`.
     huber : float
         ε_H of Huber-TV (0: TV).
 
@@ -842,13 +838,13 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
                     d2[j] = s * u2[j] + (_F1 - s) * b2[j]
                     tr[j] = lam * theta * s
                 _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps)
-                err = _primal_row(u, tp, i, 0, d1, theta)
-                errs[i] = err + _primal_row(u, tp, i, 1, d2, theta)
+                err = primal_row(u, tp, i, 0, d1, theta)
+                errs[i] = err + primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
-                    _dual_row(u, p, tp, gs, tens, i - 1, step, aniso, huber)
+                    dual_row(u, p, tp, gs, tens, i - 1, step, aniso, huber)
         for b in nb.prange(n_blk):
-            _dual_row(u, p, tp, gs, tens, blocks[b + 1] - 1, step, aniso, huber)
-        if _ordered_sum(errs) / (h * w) < tol2:
+            dual_row(u, p, tp, gs, tens, blocks[b + 1] - 1, step, aniso, huber)
+        if ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
@@ -900,7 +896,7 @@ def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, 
 # --------------------------------------------------------------------- the solver
 
 
-def _init_level(I0, params: SparseFields, state: dict) -> None:
+def _init_level(I0, params: SparseFields, state: LevelState) -> None:
     if params.regulariser == "tensor":
         init_tensor_level(I0, params, state)
     else:
@@ -909,7 +905,7 @@ def _init_level(I0, params: SparseFields, state: dict) -> None:
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseFields, state: dict,
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseFields, state: LevelState,
     engine: str = "numba",
 ):
     """Single-level, single-warp solver of sparse-regularised TV-L1 (driver plug-in).
@@ -925,34 +921,34 @@ def solve_warp(
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if "g" not in state:
+    if state.g is None:
         _init_level(I0, params, state)
-    if state.get("warp", 0) < params.n_warps or not params.sparse_active(I0.shape[:2]):
+    if state.warp < params.n_warps or not params.sparse_active(I0.shape[:2]):
         return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
 
-    stats = state.get("stats", {})
+    stats = state.stats
     t0 = time.perf_counter()
-    if "dictionaries" not in state:
-        prev = (state.get("previous") or {}).get("dictionaries")
+    if state.dictionaries is None:
+        prev = None if state.previous is None else state.previous.dictionaries
         if params.dictionary == "dct":
-            state["dictionaries"] = list(_dct(params.layout, params.patch_size, params.n_atoms))
+            state.dictionaries = list(_dct(params.layout, params.patch_size, params.n_atoms))
         else:
-            state["dictionaries"] = learn_dictionaries(flow0, params, prev)
-        state["coverage"] = coverage_weight(I0.shape[:2], params)
-    ubar = sparse_approximation(flow0, state["dictionaries"], params)
+            state.dictionaries = learn_dictionaries(flow0, params, prev)
+        state.coverage = coverage_weight(I0.shape[:2], params)
+    ubar = sparse_approximation(flow0, state.dictionaries, params)
     t1 = time.perf_counter()
 
-    lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.get("level", 0)
+    lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.level
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     # every channel of the energy's data term (the gradient constancy too), weights folded in
     ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
     u = planar(flow0, copy=True)
     tens, aniso = kernel_tensor(state)
-    wsp = (np.float32(lam_sp) * state["coverage"]).astype(np.float32)
+    wsp = (np.float32(lam_sp) * state.coverage).astype(np.float32)
     if params.combined_solver == "primal-dual":
         args = (
-            ix, iy, a, state["g"], tens, u, state["p"], state["tp"],
+            ix, iy, a, state.g, tens, u, state.p, state.tp,
             data_duals(state, ix.shape[0]), planar(ubar),
             wsp, np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
             np.float32(params.combined_coupling), np.float32(params.tv_step),
@@ -960,23 +956,23 @@ def solve_warp(
             params.data_sweeps, aniso,
         )
         if engine == "numba":
-            n = sparse_pd_iterations(*args, _row_blocks(I0.shape[0]), np.float32(params.huber))
+            n = sparse_pd_iterations(*args, row_blocks(I0.shape[0]), np.float32(params.huber))
         else:
             n = sparse_pd_iterations_numpy(*args, None, params.huber)
-        state["iterations"] = state.get("iterations", 0) + n
+        state.iterations += n
     else:
         stages = params.nesterov_stages
         # Huber-TV (ε_H) smoothed with μ_TV is the Huber function of ε_H + μ_TV
         # (Moreau envelopes add their parameters)
         args = (
-            ix, iy, a, state["g"], tens, aniso, planar(ubar), wsp, u,
+            ix, iy, a, state.g, tens, aniso, planar(ubar), wsp, u,
             np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
             _continuation(params.smoothing_tv + params.huber, stages),
             _continuation(params.smoothing_data, stages),
             max(1, params.nesterov_iterations // stages),
         )
         if engine == "numba":
-            nesterov_iterations(*args, _row_blocks(I0.shape[0]))
+            nesterov_iterations(*args, row_blocks(I0.shape[0]))
         else:
             nesterov_iterations_numpy(*args)
     t2 = time.perf_counter()

@@ -31,7 +31,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..ops.differences import image_derivatives
-from .coarse_to_fine import _check
+from .coarse_to_fine import LevelState, _check
 from .tvl1 import PlainTVL1Params, TVL1Params, edge_weight, init_level_state, run_warp
 
 __all__ = [
@@ -185,7 +185,7 @@ def diffusion_tensor(
     return out
 
 
-def init_tensor_level(I0: np.ndarray, params: TensorFields, state: dict) -> None:
+def init_tensor_level(I0: np.ndarray, params: TensorFields, state: LevelState) -> None:
     """Per-level state of tensor-directed TV-L1: edge weight, tensor ``D`` and duals.
 
     ``params`` is any TV-L1 parameter class with the :class:`TensorFields`.
@@ -197,18 +197,18 @@ def init_tensor_level(I0: np.ndarray, params: TensorFields, state: dict) -> None
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TensorFields, state: dict,
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TensorFields, state: LevelState,
     engine: str = "numba",
 ):
     """Single-level, single-warp tensor-directed TV-L1 solver (plug-in to the driver).
 
     Arguments as in :func:`varflow.twoframe.tvl1.solve_warp`; the tensor is computed
-    from ``I0`` once per level and kept in ``state["tensor"]``.
+    from ``I0`` once per level and kept in ``state.tensor``.
 
     Returns
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if "g" not in state:
+    if state.g is None:
         init_tensor_level(I0, params, state)
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)

@@ -59,9 +59,19 @@ from ..ops.differences import (
     stencil5_indices,
 )
 from ..ops.fusion import noise_sigma_flat
+from ..ops.primal_dual import (
+    F0,
+    F1,
+    NO_TENSOR,
+    dual_row,
+    ordered_sum,
+    project_dual,
+    prox_primal_row,
+    row_blocks,
+)
 from ..ops.prox import prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear, smooth_image, smooth_planes
-from .coarse_to_fine import CoarseToFineParams, _check, coarse_to_fine
+from .coarse_to_fine import CoarseToFineParams, LevelState, _check, coarse_to_fine
 
 __all__ = [
     "TVL1Params",
@@ -74,6 +84,7 @@ __all__ = [
     "edge_weight",
     "data_channels",
     "data_duals",
+    "gradient_channel_count",
 ]
 
 
@@ -300,185 +311,6 @@ def edge_weight(image: np.ndarray, c: float, g_min: float = 0.05) -> np.ndarray:
     return np.maximum(np.exp(-c * mag2), g_min).astype(np.float32)
 
 
-# float32 constants: Python float literals would make Numba compute in float64
-_F0 = np.float32(0.0)
-_F1 = np.float32(1.0)
-_EPS_GRAD = np.float32(1e-12)
-
-
-@nb.njit(cache=True, inline="always")
-def _ordered_sum(x):
-    """Sum of a 1-D array in index order (a plain loop: the same float result for any
-    thread count, where a reduction inside a parallel kernel may split it)."""
-    total = 0.0
-    for i in range(x.shape[0]):
-        total += x[i]
-    return total
-
-
-def _row_blocks(h: int) -> np.ndarray:
-    """Split ``h`` rows into contiguous blocks, a few per thread (bounds, length n+1)."""
-    n = max(1, min(h // 4, 4 * nb.get_num_threads()))
-    return np.linspace(0, h, n + 1).astype(np.int64)
-
-
-# The row kernels below index 1-D row views with plain loop variables only (no
-# ``j - 1``): Numba then knows every index is non-negative, drops its wrap-around
-# checks and LLVM vectorises the loops.
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
-    """Prox of the linearised colour L1 term for row ``i`` (in place on d1, d2, q).
-
-    Dual coordinate descent over the channels (see :func:`varflow.ops.prox.prox_linear_l1`);
-    on entry ``d = u``; on exit ``d = u - t Σ_c q_c ∇I_c``.
-    """
-    nc = a.shape[0]
-    w = a.shape[2]
-    for c in range(nc):
-        gxr = ix[c, i]
-        gyr = iy[c, i]
-        qr = q[c, i]
-        for j in range(w):
-            qv = t * qr[j]
-            d1[j] -= qv * gxr[j]
-            d2[j] -= qv * gyr[j]
-    for _s in range(n_sweeps):
-        for c in range(nc):
-            gxr = ix[c, i]
-            gyr = iy[c, i]
-            ar = a[c, i]
-            qr = q[c, i]
-            for j in range(w):
-                gx = gxr[j]
-                gy = gyr[j]
-                qo = t * qr[j]
-                e1 = d1[j] + qo * gx
-                e2 = d2[j] + qo * gy
-                nn = gx * gx + gy * gy
-                r = ar[j] + gx * e1 + gy * e2
-                qn = r / (t * nn) if nn >= _EPS_GRAD else _F0
-                qn = min(max(qn, -_F1), _F1)
-                qr[j] = qn
-                d1[j] = e1 - t * qn * gx
-                d2[j] = e2 - t * qn * gy
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _primal_row(u, tp, i, k, d, theta):
-    """``u_k[i] = d + θ div(tp_k)[i]``; returns the squared change of the row.
-
-    The divergence is the negative adjoint of the forward-difference gradient with
-    Neumann boundary (:func:`varflow.ops.differences.divergence`): it ignores the x
-    component in the last column and the y component in the last row.
-    """
-    h = u.shape[1]
-    w = u.shape[2]
-    px = tp[2 * k, i]
-    pyc = tp[2 * k + 1, i]
-    pym = tp[2 * k + 1, max(i - 1, 0)]
-    cy = _F1 if i < h - 1 else _F0  # weight of py[i]
-    cm = _F1 if i > 0 else _F0  # weight of py[i - 1]
-    ur = u[k, i]
-    err = _F0
-    # dv_x = px[j] - px[j-1] with px[-1] := 0 and px[w-1] := 0
-    dv = px[0] + cy * pyc[0] - cm * pym[0]
-    new = d[0] + theta * dv
-    err += (new - ur[0]) ** 2
-    ur[0] = new
-    pxl = px[: w - 2]  # px[j - 1] for j = 1 .. w-2
-    pxc = px[1 : w - 1]
-    pyc1 = pyc[1 : w - 1]
-    pym1 = pym[1 : w - 1]
-    d1 = d[1 : w - 1]
-    ur1 = ur[1 : w - 1]
-    for jj in range(w - 2):
-        dv = pxc[jj] - pxl[jj] + cy * pyc1[jj] - cm * pym1[jj]
-        new = d1[jj] + theta * dv
-        err += (new - ur1[jj]) ** 2
-        ur1[jj] = new
-    dv = -px[w - 2] + cy * pyc[w - 1] - cm * pym[w - 1]
-    new = d[w - 1] + theta * dv
-    err += (new - ur[w - 1]) ** 2
-    ur[w - 1] = new
-    return err
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _shrink_project(zx, zy, lim, se):
-    """``Π_{|p| ≤ lim}(z / (1 + se / lim))`` as ``z · lim / max(lim + se, |z|)``.
-
-    One division and one square root: scaling ``z`` by ``h = lim / (lim + se)`` and
-    then projecting onto the ball of radius ``lim`` multiplies it by
-    ``min(h, lim / |z|)``.  With ``se = 0`` the projection onto the ball.
-    """
-    s = lim / max(lim + se, math.sqrt(zx * zx + zy * zy))
-    return zx * s, zy * s
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
-    """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``.
-
-    With ``huber`` = ε_H > 0 the Huber-TV step
-    ``Π_{|p| ≤ g}((p + step T∇u) / (1 + step ε_H / g))``
-    (:func:`varflow.ops.prox.prox_huber_conjugate`).
-    """
-    h = u.shape[1]
-    w = u.shape[2]
-    cy = step if i < h - 1 else _F0
-    ip = min(i + 1, h - 1)
-    gr = g[i]
-    se = step * huber
-    for k in range(2):
-        uc = u[k, i]
-        un = u[k, ip]
-        ucr = uc[1:]  # u[j + 1]; the last column has a zero x difference
-        pxr = p[2 * k, i]
-        pyr = p[2 * k + 1, i]
-        if not aniso:
-            for j in range(w - 1):
-                px, py = _shrink_project(pxr[j] + step * (ucr[j] - uc[j]),
-                                         pyr[j] + cy * (un[j] - uc[j]), gr[j], se)
-                pxr[j] = px
-                pyr[j] = py
-            j = w - 1
-            px, py = _shrink_project(pxr[j], pyr[j] + cy * (un[j] - uc[j]), gr[j], se)
-            pxr[j] = px
-            pyr[j] = py
-        else:
-            t11r = tens[0, i]
-            t12r = tens[1, i]
-            t22r = tens[2, i]
-            tpxr = tp[2 * k, i]
-            tpyr = tp[2 * k + 1, i]
-            for j in range(w):
-                gx = step * (ucr[j] - uc[j]) if j < w - 1 else _F0
-                gy = cy * (un[j] - uc[j])
-                t11 = t11r[j]
-                t12 = t12r[j]
-                t22 = t22r[j]
-                px, py = _shrink_project(pxr[j] + t11 * gx + t12 * gy,
-                                         pyr[j] + t12 * gx + t22 * gy, gr[j], se)
-                pxr[j] = px
-                pyr[j] = py
-                tpxr[j] = t11 * px + t12 * py
-                tpyr[j] = t12 * px + t22 * py
-
-
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
-def _prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps):
-    """Data prox and primal update of row ``i`` (``d1``, ``d2``: row buffers); returns
-    the squared change of the flow on the row."""
-    w = u.shape[2]
-    for j in range(w):
-        d1[j] = u[0, i, j]
-        d2[j] = u[1, i, j]
-    _data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps)
-    return _primal_row(u, tp, i, 0, d1, theta) + _primal_row(u, tp, i, 1, d2, theta)
-
-
 @nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def tvl1_iterations(
     ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks,
@@ -523,7 +355,7 @@ def tvl1_iterations(
     aniso : bool
         Use the tensor (tensor-directed TV ``Σ |T ∇u_k|``).
     blocks : (n+1,) int64
-        Row-block bounds from :func:`_row_blocks`.
+        Row-block bounds from :func:`row_blocks`.
     huber : float
         ε_H of Huber-TV (0: TV).
 
@@ -552,36 +384,36 @@ def tvl1_iterations(
             d1 = buf[b, 0]
             d2 = buf[b, 1]
             for i in range(r0, r1):
-                err = _prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps)
+                err = prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps)
                 if not two:
                     errs[i] = err
                 if i > r0:
-                    _dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
+                    dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
                 if two and i - 1 > r0:
-                    errs[i - 1] = _prox_primal_row(ix, iy, a, q, u, tp, i - 1, d1, d2, t,
+                    errs[i - 1] = prox_primal_row(ix, iy, a, q, u, tp, i - 1, d1, d2, t,
                                                    theta, n_sweeps)
                 if two and i - 2 > r0:
-                    _dual_row(u, p, tp, g, tens, i - 2, step, aniso, huber)
+                    dual_row(u, p, tp, g, tens, i - 2, step, aniso, huber)
         for b in nb.prange(n_blk):  # A: dual of the last row (next block's first u)
-            _dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
+            dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
         if two:
             for b in nb.prange(n_blk):  # B: primal of the first and last rows
                 r0 = blocks[b]
                 r1 = blocks[b + 1]
-                errs[r0] = _prox_primal_row(ix, iy, a, q, u, tp, r0, buf[b, 0], buf[b, 1], t,
+                errs[r0] = prox_primal_row(ix, iy, a, q, u, tp, r0, buf[b, 0], buf[b, 1], t,
                                             theta, n_sweeps)
                 if r1 - 1 > r0:
-                    errs[r1 - 1] = _prox_primal_row(ix, iy, a, q, u, tp, r1 - 1, buf[b, 0],
+                    errs[r1 - 1] = prox_primal_row(ix, iy, a, q, u, tp, r1 - 1, buf[b, 0],
                                                     buf[b, 1], t, theta, n_sweeps)
             for b in nb.prange(n_blk):  # B: the duals left
                 r0 = blocks[b]
                 r1 = blocks[b + 1]
-                _dual_row(u, p, tp, g, tens, r0, step, aniso, huber)
+                dual_row(u, p, tp, g, tens, r0, step, aniso, huber)
                 if r1 - 2 > r0:
-                    _dual_row(u, p, tp, g, tens, r1 - 2, step, aniso, huber)
+                    dual_row(u, p, tp, g, tens, r1 - 2, step, aniso, huber)
                 if r1 - 1 > r0:
-                    _dual_row(u, p, tp, g, tens, r1 - 1, step, aniso, huber)
-        if _ordered_sum(errs) / (h * w) < tol2:
+                    dual_row(u, p, tp, g, tens, r1 - 1, step, aniso, huber)
+        if ordered_sum(errs) / (h * w) < tol2:
             break
     return it
 
@@ -622,24 +454,9 @@ def tvl1_iterations_numpy(
     return it
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
-def _project_dual(p, g):
-    """Project the dual TV pairs ``(p[2k], p[2k+1])`` of planar ``(4, H, W)`` ``p`` onto
-    the balls of radius ``g`` (H, W), in place (the dual step's projection)."""
-    _, h, w = p.shape
-    for i in nb.prange(h):
-        for k in range(2):
-            pxr = p[2 * k, i]
-            pyr = p[2 * k + 1, i]
-            gr = g[i]
-            for j in range(w):
-                px, py = _shrink_project(pxr[j], pyr[j], gr[j], _F0)
-                pxr[j] = px
-                pyr[j] = py
-
-
 def init_level_state(
-    state: dict, shape: tuple[int, int, int], g: np.ndarray, tensor: np.ndarray | None = None
+    state: LevelState, shape: tuple[int, int, int], g: np.ndarray,
+    tensor: np.ndarray | None = None,
 ) -> None:
     """Set up the per-level state of the primal-dual iterations (first warp of a level).
 
@@ -648,8 +465,8 @@ def init_level_state(
 
     Parameters
     ----------
-    state : dict
-        The driver's per-level dict; gains ``g``, ``tensor``, ``p``, ``tp`` and ``q``.
+    state : LevelState
+        The driver's per-level state; sets ``g``, ``tensor``, ``p``, ``tp`` and ``q``.
     shape : (H, W, C)
     g : ndarray, shape (H, W), float32
         Radius of the dual ball (edge weight).
@@ -658,25 +475,26 @@ def init_level_state(
         isotropic TV.
     """
     h, w, nc = shape
-    state["g"] = np.ascontiguousarray(g, dtype=np.float32)
-    state["tensor"] = None if tensor is None else np.ascontiguousarray(tensor, dtype=np.float32)
-    prev = state.get("previous") or {}
-    if "p" in prev:
-        p = planar(resize_bilinear(np.moveaxis(prev["p"], 0, -1), (h, w)))
-        _project_dual(p, state["g"])
+    state.g = np.ascontiguousarray(g, dtype=np.float32)
+    state.tensor = None if tensor is None else np.ascontiguousarray(tensor, dtype=np.float32)
+    prev = state.previous
+    if prev is not None and prev.p is not None:
+        p = planar(resize_bilinear(np.moveaxis(prev.p, 0, -1), (h, w)))
+        project_dual(p, state.g)
     else:
         p = np.zeros((4, h, w), np.float32)
-    state["p"] = p
-    if tensor is None:
-        state["tp"] = p
+    state.p = p
+    if state.tensor is None:
+        state.tp = p
     else:
-        t11, t12, t22 = state["tensor"]
+        t11, t12, t22 = state.tensor
         tp = np.empty_like(p)
         for k in (0, 2):
             tp[k] = t11 * p[k] + t12 * p[k + 1]
             tp[k + 1] = t12 * p[k] + t22 * p[k + 1]
-        state["tp"] = tp
-    state["q"] = np.zeros((nc, h, w), np.float32)
+        state.tp = tp
+    state.q = np.zeros((nc, h, w), np.float32)
+    state.q_all = None
 
 
 def planar(x: np.ndarray, copy: bool = False) -> np.ndarray:
@@ -720,7 +538,7 @@ def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
         oy = iy[c, i]
         oa = a[c, i]
         for j in range(w):
-            m = _F1 if ins[j] else _F0
+            m = F1 if ins[j] else F0
             gx = rx[j] * m
             gy = ry[j] * m
             ox[j] = gx
@@ -761,7 +579,8 @@ def robust_data_term(params: TVL1Params) -> bool:
     return params.gradient_weight > 0 or params.data_normalisation > 0
 
 
-def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict):
+def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
+                  state: LevelState):
     """All channels of the linearised data term of one warp, weights folded in.
 
     The colour channels of :func:`linearise`, then (γ > 0) two gradient-constancy
@@ -773,7 +592,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     with ``J = G_σ * I`` (``σ = gradient_sigma · η^level``; the warped first
     derivatives are smoothed, and their derivatives, symmetrised, stand for the
     warped Hessian), scaled by ``γ/λ`` so that the prox with step ``λθ`` applies
-    the weight γ.  ``∇J0`` is computed once per level and kept in ``state["grad0"]``.
+    the weight γ.  ``∇J0`` is computed once per level and kept in ``state.grad0``.
     With ζ > 0 every channel is then divided by ``sqrt(|∇ρ|² + ζ²)``, ``∇ρ`` the
     unweighted gradient of its constraint (Zimmer et al. 2011).  With γ = ζ = 0 this
     is exactly :func:`linearise`.  Numba kernels; :func:`data_channels_numpy` is the
@@ -784,8 +603,8 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     I0, I1w, I1w_dx, I1w_dy, inside, flow0
         As in :func:`solve_warp`.
     params : TVL1Params
-    state : dict
-        The level state: reads ``level`` (0 if absent), caches ``grad0``.
+    state : LevelState
+        The level state: reads ``level``, caches ``grad0``.
 
     Returns
     -------
@@ -796,7 +615,7 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, st
     if not robust_data_term(params):
         return linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
     h, w, nc = I0.shape
-    n_k = nc + 2 * _gradient_channels(params, nc)
+    n_k = nc + 2 * gradient_channel_count(params, nc)
     ix = np.empty((n_k, h, w), np.float32)
     iy = np.empty_like(ix)
     a = np.empty_like(ix)
@@ -829,7 +648,7 @@ def _normalisation(ix, iy, nc: int, w_grad, zeta: float) -> np.ndarray:
     return np.float32(1) / np.sqrt((ix * ix + iy * iy) / (wts * wts) + zeta2)
 
 
-def _gradient_channels(params: TVL1Params, nc: int) -> int:
+def gradient_channel_count(params: TVL1Params, nc: int) -> int:
     """Colour channels the gradient term is built from: 0 (γ = 0), 1 (grey) or ``nc``."""
     if params.gradient_weight <= 0:
         return 0
@@ -849,7 +668,7 @@ def _gradient_inputs(dx, dy, params: TVL1Params):
     return grey[0], grey[1], np.float32(w_grad * nc)
 
 
-def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "numba"):
+def _reference_gradients(I0, params: TVL1Params, state: LevelState, engine: str = "numba"):
     """``(σ, J0)`` of the level: the smoothed first-frame derivatives, cached in ``state``.
 
     Built by the very operations that give the second frame's side in
@@ -862,8 +681,8 @@ def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "num
     pair ``(∂x J0, ∂y J0)``, each ``(H, W, G)``.  Both cache under ``grad0``: a
     level state serves one engine.
     """
-    sigma = params.gradient_sigma * params.scale_factor ** state.get("level", 0)
-    if "grad0" not in state:
+    sigma = params.gradient_sigma * params.scale_factor ** state.level
+    if state.grad0 is None:
         nc = I0.shape[2]
         if engine == "numba":
             planes = derivative_planes(I0)
@@ -871,13 +690,13 @@ def _reference_gradients(I0, params: TVL1Params, state: dict, engine: str = "num
             planes = derivative_planes_numpy(I0)
         dx, dy, _ = _gradient_inputs(planes[..., nc:2 * nc], planes[..., 2 * nc:], params)
         if engine == "numba":
-            state["grad0"] = _smoothed_stack(dx, dy, sigma)
+            state.grad0 = _smoothed_stack(dx, dy, sigma)
         else:
             g = dx.shape[2]
             j0 = smooth_image(np.concatenate([dx, dy], axis=2), sigma)
-            state["grad0"] = (np.ascontiguousarray(j0[..., :g]),
+            state.grad0 = (np.ascontiguousarray(j0[..., :g]),
                               np.ascontiguousarray(j0[..., g:]))
-    return sigma, state["grad0"]
+    return sigma, state.grad0
 
 
 def _smoothed_stack(dx, dy, sigma: float) -> np.ndarray:
@@ -895,7 +714,7 @@ def _smoothed_stack(dx, dy, sigma: float) -> np.ndarray:
 def _gradient_pixel(ins, jx, jy, gx0, gy0, hxx, hxy1, hyx, hyy, u0, v0, wg):
     """The two gradient-constancy channels of one pixel: ``(ix, iy, a)`` of the x
     channel, then of the y channel (zero outside)."""
-    m = wg if ins else _F0
+    m = wg if ins else F0
     hxy = np.float32(0.5) * (hxy1 + hyx)
     return (m * hxx, m * hxy, m * (jx - gx0 - hxx * u0 - hxy * v0),
             m * hxy, m * hyy, m * (jy - gy0 - hxy * u0 - hyy * v0))
@@ -965,7 +784,7 @@ def _gradient_channels_kernel(j1, i0, inside, flow0, wg, k0, ix, iy, a):
 
 
 def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
-                        state: dict):
+                        state: LevelState):
     """Reference NumPy implementation of :func:`data_channels` (same arguments, same
     state cache, same outputs)."""
     ix, iy, a = linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
@@ -995,45 +814,42 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
             np.ascontiguousarray(a, np.float32))
 
 
-_NO_TENSOR = np.zeros((3, 1, 1), np.float32)
-
-
-def kernel_tensor(state: dict) -> tuple[np.ndarray, bool]:
+def kernel_tensor(state: LevelState) -> tuple[np.ndarray, bool]:
     """``(tensor, aniso)`` arguments of the kernels from the level state.
 
     The kernels need an array even for isotropic TV: a (3, 1, 1) placeholder that
     they never read.
     """
-    tens = state["tensor"]
-    return (_NO_TENSOR, False) if tens is None else (tens, True)
+    tens = state.tensor
+    return (NO_TENSOR, False) if tens is None else (tens, True)
 
 
-def data_duals(state: dict, n_channels: int) -> np.ndarray:
+def data_duals(state: LevelState, n_channels: int) -> np.ndarray:
     """The dual variables ``q`` of the data prox for ``n_channels`` channels of
     :func:`data_channels` (warm started across the warps of a level).
 
-    ``state["q"]`` holds those of the colour channels; with extra channels (the
-    gradient-constancy term) one array ``state["q_all"]`` holds every dual variable
-    and ``state["q"]`` becomes a view of its first planes.
+    ``state.q`` holds those of the colour channels; with extra channels (the
+    gradient-constancy term) one array ``state.q_all`` holds every dual variable
+    and ``state.q`` becomes a view of its first planes.
     """
-    nc = state["q"].shape[0]
+    nc = state.q.shape[0]
     if n_channels == nc:
-        return state["q"]
-    q = state.get("q_all")
+        return state.q
+    q = state.q_all
     if q is None or q.shape[0] != n_channels:
-        extra = np.zeros((n_channels - nc,) + state["q"].shape[1:], np.float32)
-        q = np.concatenate([state["q"], extra])
-        state["q_all"] = q
-        state["q"] = q[:nc]
+        extra = np.zeros((n_channels - nc,) + state.q.shape[1:], np.float32)
+        q = np.concatenate([state.q, extra])
+        state.q_all = q
+        state.q = q[:nc]
     return q
 
 
-def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict,
+def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: LevelState,
              engine: str = "numba") -> np.ndarray:
     """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
 
     Shared by every TV-L1 flavour (isotropic, edge-weighted, tensor-directed): they
-    differ only in ``state["g"]`` and ``state["tensor"]``.  Arguments as in
+    differ only in ``state.g`` and ``state.tensor``.  Arguments as in
     :func:`solve_warp`.
     """
     if engine not in ("numba", "numpy"):
@@ -1043,20 +859,21 @@ def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: 
     tens, aniso = kernel_tensor(state)
     q = data_duals(state, ix.shape[0])
     args = (
-        ix, iy, a, state["g"], tens, u, state["p"], state["tp"], q,
+        ix, iy, a, state.g, tens, u, state.p, state.tp, q,
         np.float32(params.data_weight), np.float32(params.coupling), np.float32(params.tv_step),
         params.max_iterations, np.float32(params.tolerance), params.data_sweeps, aniso,
     )
     if engine == "numba":
-        n = tvl1_iterations(*args, _row_blocks(I0.shape[0]), np.float32(params.huber))
+        n = tvl1_iterations(*args, row_blocks(I0.shape[0]), np.float32(params.huber))
     else:
         n = tvl1_iterations_numpy(*args, None, params.huber)
-    state["iterations"] = state.get("iterations", 0) + n
+    state.iterations += n
     return np.moveaxis(u, 0, -1)  # a view: the driver's median reads it planar, uncopied
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: dict, engine: str = "numba"
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: LevelState,
+    engine: str = "numba",
 ):
     """Single-level, single-warp TV-L1 solver (the method's plug-in to the driver).
 
@@ -1070,7 +887,7 @@ def solve_warp(
     flow0 : ndarray, shape (H, W, 2), float32
         Linearisation point (and initial value).
     params : TVL1Params
-    state : dict
+    state : LevelState
         Per-level state: dual variables ``p`` and ``q`` and the edge weight ``g``.
     engine : {"numba", "numpy"}
 
@@ -1078,7 +895,7 @@ def solve_warp(
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if "g" not in state:
+    if state.g is None:
         g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
         init_level_state(state, I0.shape, g)
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
