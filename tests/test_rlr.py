@@ -310,7 +310,8 @@ def test_adjacent_link_factor_follows_the_frames_noise():
      ("lowrank_strata", -1), ("propagate_levels", 0), ("fb_tolerance", 0.0),
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
      ("ustep_iterations", 0), ("flow_method", "tensor"), ("flow_method", "nope"),
-     ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0)],
+     ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0), ("fusion_margin", -0.1),
+     ("fusion_noise", -1.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):
@@ -407,3 +408,49 @@ def test_a_gate_of_one_is_the_ungated_link(small_seq):
     a = track_rlr(frames, s.ref, params.replace(link_gate=0.0))
     b = track_rlr(frames, s.ref, params.replace(link_gate=1e9))  # every factor is 1.0
     np.testing.assert_array_equal(a, b)
+
+
+def test_fusion_takes_the_decoupled_displacement_where_the_data_say_so():
+    """A planted pair: the coupled field is off by 3 px in a square, the decoupled one
+    is right; the fused field is the decoupled one in the square and the coupled one
+    (equal to it elsewhere) outside; a margin above any cost keeps the coupled field."""
+    from varflow.generators.pairs import synthetic_pair
+    from varflow.multiframe.rlr import fuse_decoupled
+
+    f0, f1, gt = synthetic_pair("translation", shape=(64, 80), magnitude=2.0, channels=3,
+                                seed=3)
+    frames = np.stack([f0, f1]).astype(np.float32)
+    right = np.stack([np.zeros_like(gt), gt]).astype(np.float32)
+    wrong = right.copy()
+    wrong[1, 20:44, 24:56] += np.float32(3.0)
+    out, share = fuse_decoupled(frames, 0, wrong, right, 0.005)
+    inner = (slice(26, 38), slice(30, 50))  # away from the square's edges
+    np.testing.assert_array_equal(out[1][inner], right[1][inner])
+    assert np.abs(out[1] - right[1]).max() <= 3.0 + 1e-6
+    assert float(np.linalg.norm(out[1] - right[1], axis=-1).mean()) < 0.05  # 0; wrong 0.64
+    assert 0.1 < share < 0.25  # 0.19: the square (0.15) and the windows reaching into it
+    kept, none = fuse_decoupled(frames, 0, wrong, right, 1e9)
+    np.testing.assert_array_equal(kept, wrong)
+    assert none == 0.0
+    np.testing.assert_array_equal(out[0], wrong[0])  # the reference is never touched
+
+
+def test_rlr_fuses_its_linked_and_its_decoupled_refinement(small_seq):
+    """Every (pixel, frame) of the default is that of the linked run or of the
+    decoupled run (link_weight = 0) of the same clip, bit for bit; both occur."""
+    s = small_seq
+    frames = check_frames(s.frames)
+    params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20)
+    stats: dict = {}
+    ticks: list = []
+    fused = track_rlr(frames, s.ref, params, callback=lambda d, t: ticks.append((d, t)),
+                      stats=stats)
+    linked = track_rlr(frames, s.ref, params.replace(decoupled_fusion=False))
+    free = track_rlr(frames, s.ref, params.replace(link_weight=0.0))
+    same_link = np.all(fused == linked, axis=-1)
+    same_free = np.all(fused == free, axis=-1)
+    assert np.all(same_link | same_free)
+    assert 0 < stats["decoupled_share"] < 1
+    assert (~same_link).any() and (~same_free).any()
+    assert [d for d, _ in ticks] == list(range(1, len(ticks) + 1))  # one bar, no restart
+    assert all(t == ticks[-1][1] for _, t in ticks) and ticks[-1][0] == ticks[-1][1]
