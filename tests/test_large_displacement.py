@@ -218,7 +218,8 @@ def test_the_fit_gate_keeps_the_link_off_a_fast_object():
     """Issue 27: with tvl1's energy the link τ = 2 pulls the disc towards the clip's
     low-rank fit; the fit gate decouples the region the model does not hold.  Measured
     (2026-12-02, the matching-guided candidates, L-step seeds 0-2): far frames
-    0.22-0.48 px with the default gate (k = 1), 0.89-4.38 ungated, 0.12-0.15 decoupled."""
+    0.22-0.48 px with the default gate (k = 1), 0.89-4.38 ungated, 0.12-0.15 decoupled,
+    all without the decoupled fusion."""
     from varflow.generators.large_pairs import fast_object_clip
 
     frames, gt, disc, ref = fast_object_clip()
@@ -227,8 +228,12 @@ def test_the_fit_gate_keeps_the_link_off_a_fast_object():
     def disc_epe(traj):
         return [float(np.hypot(*(traj[n] - gt[n])[disc].T).mean()) for n in far]
 
-    gated, ungated = (np.array([disc_epe(varflow.track(frames, ref, "rlr", seed=s, **kw))
-                                for s in (0, 1, 2)])
-                      for kw in ({}, {"link_gate": 0.0}))
+    gated, ungated, default = (
+        np.array([disc_epe(varflow.track(frames, ref, "rlr", seed=s, **kw)) for s in (0, 1, 2)])
+        for kw in ({"decoupled_fusion": False}, {"link_gate": 0.0, "decoupled_fusion": False},
+                   {}))
     assert gated.max() < 0.8, gated
     assert ungated.mean() > 3.0 * gated.mean(), (gated, ungated)
+    # the default also fuses the decoupled refinement (0.4.0): measured 0.06-0.15 px,
+    # and 0.12-0.24 with the gate off
+    assert default.max() < 0.4, default
