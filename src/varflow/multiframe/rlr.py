@@ -77,6 +77,12 @@ Beyond the book (``init``, ``visibility``, ``final_repair``):
   own data term is better than the low-rank fit of the clip, and the full link on
   noisy frames, where the link averages the noise out; the rule reads the noise
   off the frames (:func:`adjacent_factor`).
+* **Decoupled fusion** (``decoupled_fusion``, ``fusion_margin``, ``fusion_noise``):
+  the same initial trajectories are refined a second time without the link, and
+  every (pixel, frame) keeps the decoupled displacement where the soft-census data
+  cost says it fits better by a noise-dependent margin (:func:`fuse_decoupled`), the
+  linked one elsewhere: the link stays where the motion is low rank or the frames are
+  too noisy to tell.
 * **L-step sample**: the columns of the l1 filtering's seed are sampled per motion
   cluster (``lowrank_strata``) so that a small moving object has basis vectors.
 * **Final repair**: every frame's field is repaired across motion edges
@@ -1747,7 +1753,10 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
     """Robust Low-Rank trajectories (see the module docstring).
 
     Arguments as in :func:`refine_trajectories`; ``stats`` also gains
-    ``lstep_seconds`` and ``ranks`` (the rank found by each L-step).
+    ``lstep_seconds`` and ``ranks`` (the rank found by each L-step, of both
+    refinements), and with the decoupled fusion ``decoupled_share`` (the share of the
+    (pixel, frame) pairs that took the decoupled displacement), ``fusion_margin`` (the
+    margin m used) and ``decoupled_seconds``; ``visible`` is that of the fused result.
 
     Returns
     -------
