@@ -122,7 +122,7 @@ from .._validate import check_field as _check
 from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import (
     census_planes,
-    flow_cost,
+    fuse,
     noise_sigma,
     repair,
     repair_margin,
@@ -1708,12 +1708,13 @@ def fuse_decoupled(frames: np.ndarray, ref: int, coupled: np.ndarray, decoupled:
     """Per pixel and frame, the coupled or the decoupled trajectory, by the data.
 
     For every frame ``n ≠ ref`` the edge-aware soft-census cost of both
-    displacement fields (:func:`varflow.ops.fusion.flow_cost` on
-    :func:`~varflow.ops.fusion.census_planes`, truncation 0.5, the support weights of
-    the reference) is compared, and the decoupled displacement is kept where its
-    cost is lower than the coupled one's by more than ``margin``: the low-rank link
-    stays where the frames do not say otherwise, and a region whose motion the link
-    has pulled off the data gets the decoupled refinement back.
+    displacement fields (:func:`varflow.ops.fusion.fuse` with the cost of
+    :func:`~varflow.ops.fusion.flow_cost` on :func:`~varflow.ops.fusion.census_planes`,
+    truncation 0.5, the support weights of the reference) is compared, and the
+    decoupled displacement is kept where its cost is lower than the coupled one's by
+    more than ``margin``: the low-rank link stays where the frames do not say
+    otherwise, and a region whose motion the link has pulled off the data gets the
+    decoupled refinement back.
 
     Parameters
     ----------
@@ -1737,12 +1738,9 @@ def fuse_decoupled(frames: np.ndarray, ref: int, coupled: np.ndarray, decoupled:
     taken = 0
     others = [n for n in range(frames.shape[0]) if n != ref]
     for n in others:
-        other = census_planes(frames[n])
-        c_link = flow_cost(planes, other, coupled[n], weights, 0.5)
-        c_free = flow_cost(planes, other, decoupled[n], weights, 0.5)
-        better = c_free < c_link - np.float32(margin)
-        out[n][better] = decoupled[n][better]
-        taken += int(better.sum())
+        out[n], choice = fuse(planes, census_planes(frames[n]), [coupled[n], decoupled[n]],
+                              weights, truncation=0.5, margin=margin)
+        taken += int(choice.sum())
     share = taken / max(1, len(others) * frames.shape[1] * frames.shape[2])
     return out, float(share)
 

@@ -426,7 +426,8 @@ def flow_cost(i0: np.ndarray, i1: np.ndarray, flow: np.ndarray, weights: np.ndar
 
 
 def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: np.ndarray,
-         truncation: float = 0.1, engine: str = "numba") -> tuple[np.ndarray, np.ndarray]:
+         truncation: float = 0.1, engine: str = "numba",
+         margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel, the candidate flow with the smallest :func:`flow_cost`.
 
     Parameters
@@ -435,7 +436,9 @@ def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: 
         As in :func:`flow_cost`.
     candidates : list of ndarray, each (H, W, 2)
         In order of preference: a later candidate wins only where its cost is
-        strictly smaller.
+        smaller by more than ``margin``.
+    margin : float
+        The cost advantage a later candidate needs (0: strictly smaller).
 
     Returns
     -------
@@ -450,7 +453,7 @@ def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: 
     choice = np.zeros(best_cost.shape, np.int8)
     for k, cand in enumerate(candidates[1:], start=1):
         cost = flow_cost(i0, i1, cand, weights, truncation, engine)
-        better = cost < best_cost
+        better = cost < best_cost - np.float32(margin)
         best[better] = np.asarray(cand, np.float32)[better]
         best_cost = np.where(better, cost, best_cost)
         choice[better] = k
