@@ -34,21 +34,31 @@ def _modules() -> dict[str, tuple[Path, bool]]:
 MODULES = _modules()
 
 
-def _imports(name: str) -> list[tuple[str, int]]:
-    """``(imported name, line)`` of every import statement of a module (any depth)."""
+def _import_nodes(name: str):
+    """``(node, target)`` of every import statement of a module (any depth); ``target``
+    is the module a ``from ... import`` reads from (relative imports resolved), None
+    for a plain ``import``."""
     path, is_package = MODULES[name]
     package = name if is_package else name.rpartition(".")[0]
-    out = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
         if isinstance(node, ast.Import):
-            out += [(a.name, node.lineno) for a in node.names]
+            yield node, None
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".")
                 base = base[:len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
+                yield node, ".".join(base + ([node.module] if node.module else []))
             else:
-                target = node.module or ""
+                yield node, node.module or ""
+
+
+def _imports(name: str) -> list[tuple[str, int]]:
+    """``(imported name, line)`` of every import statement of a module (any depth)."""
+    out = []
+    for node, target in _import_nodes(name):
+        if target is None:
+            out += [(a.name, node.lineno) for a in node.names]
+        else:
             for a in node.names:
                 full = f"{target}.{a.name}"
                 out.append((full if full in MODULES else target, node.lineno))
@@ -123,20 +133,9 @@ def test_io_keeps_to_readers_and_writers(name: str) -> None:
 
 def _private_imports(name: str) -> list[tuple[str, str, int]]:
     """``(module, private name, line)`` of every ``from X import _y`` of a module."""
-    path, is_package = MODULES[name]
-    package = name if is_package else name.rpartition(".")[0]
-    out = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[:len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            out += [(target, a.name, node.lineno) for a in node.names
-                    if a.name.startswith("_") and not a.name.startswith("__")]
-    return out
+    return [(target, a.name, node.lineno) for node, target in _import_nodes(name)
+            if target is not None for a in node.names
+            if a.name.startswith("_") and not a.name.startswith("__")]
 
 
 SOLVER_PACKAGES = ("varflow.ops", "varflow.twoframe", "varflow.multiframe")
