@@ -6,8 +6,10 @@ flow(frame0, frame1, method="tvl1", **params)
     Dense flow ``(H, W, 2)`` float32 from ``frame0`` to ``frame1``.
 track(frames, ref=None, method="rlr", **params)
     Dense trajectories ``(F, H, W, 2)`` of the reference frame's pixels.
-methods() / track_methods()
-    Names of the registered two-frame / trajectory methods.
+interpolate(frame0, frame1, t=0.5, method=None, **params)
+    The frame (or a stack of frames) at time ``t`` between two frames.
+methods() / track_methods() / interpolation_methods()
+    Names of the registered two-frame / trajectory / interpolation methods.
 read_flo / write_flo / read_kitti_png / write_kitti_png / read_image / read_frames /
 read_trajectories / write_trajectories
     File I/O.
@@ -66,6 +68,8 @@ __all__ = [
     "angular_error",
     "rms_endpoint_error",
     "evaluate",
+    "interpolate",
+    "interpolation_methods",
 ]
 
 
@@ -159,6 +163,29 @@ def track(
         fp = fp if isinstance(fp, TVL1Params) else TVL1Params()
         visible = estimate_visibility(traj, r, frame_pyramids(arr, fp), fp)
     return traj, visible
+
+
+def interpolation_methods() -> list[str]:
+    """Names of the registered frame-interpolation methods
+    (see :data:`varflow.retime.methods.INTERPOLATORS`)."""
+    from .retime.methods import INTERPOLATORS
+
+    return sorted(INTERPOLATORS)
+
+
+def interpolate(frame0: np.ndarray, frame1: np.ndarray, t: Any = 0.5, method: str | None = None,
+                **kwargs: Any) -> np.ndarray:
+    """The frame at time ``t`` between ``frame0`` and ``frame1``; see
+    :func:`varflow.retime.methods.interpolate` for the parameters.
+
+    Returns
+    -------
+    ndarray
+        Shape and dtype of ``frame0`` (a stack of them for a sequence ``t``).
+    """
+    from .retime.methods import interpolate as _interpolate
+
+    return _interpolate(frame0, frame1, t, method, **kwargs)
 
 
 def flow(

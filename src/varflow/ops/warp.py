@@ -7,7 +7,9 @@ where the mask is false, so pixels that leave the frame are filled in by the
 regulariser instead of by clamped border colours.
 
 Two engines with the same signature: :func:`warp_bicubic_numpy` (the reference)
-and the Numba kernel used by :func:`warp_bicubic`.
+and the Numba kernel used by :func:`warp_bicubic`; likewise :func:`warp_bilinear_numpy`
+and :func:`warp_bilinear` for bilinear interpolation (the frame synthesis of
+:mod:`varflow.retime`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["warp_bicubic", "warp_bicubic_numpy", "keys_weights", "in_bounds"]
+__all__ = ["warp_bicubic", "warp_bicubic_numpy", "warp_bilinear", "warp_bilinear_numpy",
+           "keys_weights", "in_bounds"]
 
 _A = -0.5
 
@@ -189,4 +192,86 @@ def warp_bicubic(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.n
     out = np.empty_like(planes)
     inside = np.empty(planes.shape[:2], dtype=np.bool_)
     _warp_kernel(planes, flow_p, out, inside)
+    return out, inside
+
+
+def warp_bilinear_numpy(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reference engine of :func:`warp_bilinear` (NumPy)."""
+    planes = np.asarray(planes, dtype=np.float32)
+    h, w = planes.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    x = xx + flow[..., 0].astype(np.float32)
+    y = yy + flow[..., 1].astype(np.float32)
+    inside = (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+    x = np.clip(np.nan_to_num(x, nan=0.0), 0, w - 1)
+    y = np.clip(np.nan_to_num(y, nan=0.0), 0, h - 1)
+    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2) if w > 1 else np.zeros_like(x, np.int64)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2) if h > 1 else np.zeros_like(y, np.int64)
+    x1 = np.minimum(x0 + 1, w - 1)
+    y1 = np.minimum(y0 + 1, h - 1)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None]
+    top = planes[y0, x0] * (1 - fx) + planes[y0, x1] * fx
+    bottom = planes[y1, x0] * (1 - fx) + planes[y1, x1] * fx
+    return (top * (1 - fy) + bottom * fy).astype(np.float32), inside
+
+
+@nb.njit(cache=True, parallel=True)
+def _bilinear_kernel(planes, flow, out, inside):
+    """Bilinear samples of ``planes`` (H, W, K) at ``x + flow``; ``flow`` planar (2, H, W)."""
+    h, w, k = planes.shape
+    xmax = np.float32(w - 1.0)
+    ymax = np.float32(h - 1.0)
+    one = np.float32(1.0)
+    for i in nb.prange(h):
+        for j in range(w):
+            x = np.float32(j) + flow[0, i, j]
+            y = np.float32(i) + flow[1, i, j]
+            if x != x or y != y:  # NaN flow
+                inside[i, j] = False
+                x = np.float32(0.0)
+                y = np.float32(0.0)
+            else:
+                inside[i, j] = x >= 0 and x <= xmax and y >= 0 and y <= ymax
+            x = min(max(x, np.float32(0.0)), xmax)
+            y = min(max(y, np.float32(0.0)), ymax)
+            x0 = min(int(np.floor(x)), w - 2) if w > 1 else 0
+            y0 = min(int(np.floor(y)), h - 2) if h > 1 else 0
+            x1 = min(x0 + 1, w - 1)
+            y1 = min(y0 + 1, h - 1)
+            fx = x - np.float32(x0)
+            fy = y - np.float32(y0)
+            for c in range(k):
+                top = planes[y0, x0, c] * (one - fx) + planes[y0, x1, c] * fx
+                bottom = planes[y1, x0, c] * (one - fx) + planes[y1, x1, c] * fx
+                out[i, j, c] = top * (one - fy) + bottom * fy
+
+
+def warp_bilinear(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Warp stacked image planes backwards by a flow with bilinear interpolation.
+
+    ``out[y, x] = planes(y + v, x + u)``, the border replicated outside the image;
+    a NaN flow samples the top-left pixel and is reported outside.
+
+    Parameters
+    ----------
+    planes : ndarray, shape (H, W, K)
+        Converted to float32.
+    flow : ndarray, shape (H, W, 2)
+        ``[..., 0]`` = u (x), ``[..., 1]`` = v (y).
+
+    Returns
+    -------
+    warped : ndarray, shape (H, W, K), float32
+    inside : ndarray, shape (H, W), bool
+        True where ``(x + u, y + v)`` lies inside ``[0, W-1] x [0, H-1]``.
+    """
+    planes = np.ascontiguousarray(planes, dtype=np.float32)
+    flow = np.asarray(flow)
+    if planes.ndim != 3 or flow.shape != planes.shape[:2] + (2,):
+        raise ValueError(f"warp: planes {planes.shape} and flow {flow.shape} do not match")
+    flow_p = np.ascontiguousarray(np.moveaxis(flow, -1, 0), dtype=np.float32)
+    out = np.empty_like(planes)
+    inside = np.empty(planes.shape[:2], dtype=np.bool_)
+    _bilinear_kernel(planes, flow_p, out, inside)
     return out, inside
