@@ -21,7 +21,12 @@ Video (PyAV, i.e. FFmpeg)
       use the full 0..65535 range), and ``(H, W)`` for grey pixel formats.
     * :class:`VideoWriter` / :func:`write_video` encode ``uint8`` or ``uint16``
       frames atomically (temporary file in the target directory, then
-      :func:`os.replace`); ``.mkv`` defaults to lossless FFV1.
+      :func:`os.replace`); ``.mkv`` defaults to lossless FFV1.  With ``audio=PATH``
+      the writer also copies the first audio stream of ``PATH`` (remuxed, or
+      re-encoded when the container cannot hold its codec).
+    * :func:`video_rate` gives a stream's exact rational frame rate and
+      :func:`check_video_complete` detects a file cut short (its header promises
+      more than is there).
 
 A corrupt, truncated or non-video file raises a one-line :class:`ValueError` (a
 missing path :class:`FileNotFoundError`); FFmpeg's own exceptions never escape.
@@ -76,9 +81,11 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "default_video_codec",
+    "check_video_complete",
     "list_frame_files",
     "read_frames",
     "video_info",
+    "video_rate",
     "write_video",
 ]
 
@@ -518,6 +525,97 @@ def video_info(path: PathLike) -> VideoInfo:
     (120, (480, 640, 3), dtype('uint8'))
     """
     return _probe(_check_video_path(path))[1]
+
+
+def video_rate(path: PathLike) -> Fraction | None:
+    """The exact frame rate of the first video stream, as FFmpeg gives it.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    Fraction or None
+        The stream's average rate (``24000/1001`` for NTSC film), else its guessed
+        rate; None when the file gives neither.  A rate within a relative 1e-6 of an
+        integer, a half-integer or a multiple of ``1/1001`` is that number:
+        containers with coarse timestamps (Matroska stores frame durations in
+        nanoseconds) turn ``48000/1001`` into ``7001/146``.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`video_info`.
+    """
+    p = _check_video_path(path)
+    container, stream = _open_input(p)
+    try:
+        for rate in (stream.average_rate, stream.guessed_rate):
+            if rate is not None and rate > 0:
+                exact = Fraction(rate.numerator, rate.denominator)
+                for d in (1, 2, 1001):  # 30, 25/2, 30000/1001, ...
+                    near = Fraction(round(exact * d), d)
+                    if near > 0 and abs(near - exact) <= exact * Fraction(1, 10**6):
+                        return near
+                return exact
+        return None
+    finally:
+        container.close()
+
+
+def check_video_complete(path: PathLike) -> None:
+    """Fail when a video's data end before what its header declares (a truncated file).
+
+    Demuxes every packet of the file once (no decoding) and compares with the
+    container header: the video stream's declared frame count (AVI, MP4) and the
+    container's declared duration (Matroska writes it first) against the last
+    packet's end time of any stream.  A file cut off in the middle of its data
+    still opens and decodes up to the cut, so :class:`VideoReader` alone reads it
+    as a shorter video.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not a readable video, its packets cannot be demuxed to the
+        end, or it holds fewer frames (more than one frame period less time) than
+        its header declares.
+    """
+    p = _check_video_path(path)
+    index, info = _probe(p)
+    container, stream = _open_input(p)
+    try:
+        with _av_errors(p, "read the video to its end"):
+            end = -math.inf
+            for packet in container.demux():
+                if packet.size == 0 or packet.time_base is None:
+                    continue
+                ts = packet.pts if packet.pts is not None else packet.dts
+                if ts is None:
+                    continue
+                end = max(end, float((ts + (packet.duration or 0)) * packet.time_base))
+            declared_frames = int(stream.frames or 0)
+            declared = container.duration / 1e6 if container.duration else None
+            start = container.start_time / 1e6 if container.start_time else 0.0
+    finally:
+        container.close()
+    if declared_frames > info.n_frames:
+        raise ValueError(
+            f"{p}: the video is truncated or damaged: its header declares {declared_frames} "
+            f"frames, {info.n_frames} are present"
+        )
+    period = 1.0 / info.fps if math.isfinite(info.fps) and info.fps > 0 else 0.04
+    if declared is not None and math.isfinite(end) and end - start < declared - 1.5 * period:
+        raise ValueError(
+            f"{p}: the video is truncated or damaged: its header declares {declared:.3f} s, "
+            f"the data end after {max(0.0, end - start):.3f} s ({info.n_frames} frames)"
+        )
 
 
 # --------------------------------------------------------------------------- reading
@@ -997,8 +1095,8 @@ def default_video_codec(path: PathLike) -> str:
 
 
 _LOSSLESS = frozenset({"ffv1", "ffvhuff", "huffyuv", "utvideo", "png", "rawvideo"})
-_CRF_CODECS = frozenset({"libx264", "libx265", "libvpx-vp9", "libvpx", "libaom-av1",
-                         "libsvtav1"})  # fmt: skip
+_CRF_CODECS = frozenset({"libx264", "libx264rgb", "libx265", "libvpx-vp9", "libvpx",
+                         "libaom-av1", "libsvtav1"})  # fmt: skip
 _QSCALE_CODECS = frozenset({"mpeg4", "mpeg2video", "mpeg1video", "mjpeg", "msmpeg4",
                             "msmpeg4v2"})  # fmt: skip
 _DEFAULT_QUALITY = {"libx264": 18, "libx265": 20, "libvpx-vp9": 30, "libvpx": 10}
@@ -1041,6 +1139,133 @@ def _chroma_subsampled(pix_fmt: str) -> bool:
     )
 
 
+#: Audio encoders tried, in order, when a container cannot hold the source's codec
+#: (after the container's own default).
+_AUDIO_ENCODERS = ("aac", "libopus", "libvorbis", "libmp3lame", "flac")
+
+
+class _AudioCopy:
+    """The first audio stream of a file, copied into an output container by time."""
+
+    def __init__(self, source: Path, container: Any, target: Path) -> None:
+        self.source = source
+        self.mode: str | None = None
+        self.codec: str | None = None
+        self._src: Any = None
+        self._pending: Any = None
+        self._container = container
+        with _av_errors(source, "read the audio"):
+            self._src = av.open(str(source), "r", metadata_errors="replace")
+            if not self._src.streams.audio:
+                logger.info("%s: no audio stream; %s gets none", source, target)
+                self.close()
+                return
+            ain = self._src.streams.audio[0]
+            offset = 0.0
+            if self._src.streams.video:
+                v = self._src.streams.video[0]
+                if v.start_time is not None and v.time_base is not None:
+                    offset = float(v.start_time * v.time_base)
+            self._offset = offset
+            self._in = ain
+            name = ain.codec_context.name
+            supported = container.supported_codecs
+            if name in supported:
+                self.out = container.add_stream_from_template(ain)
+                self.mode, self.codec = "copy", name
+            else:
+                encoder = self._encoder(container, supported)
+                if encoder is None:
+                    self.close()
+                    raise ValueError(
+                        f"{target}: the container cannot hold the {name} audio of {source}, "
+                        "and no encoder for an audio codec it accepts is installed; write "
+                        "a .mkv, or leave the audio out"
+                    )
+                layout = {1: "mono", 2: "stereo"}.get(ain.channels, ain.layout.name)
+                self.out = container.add_stream(encoder, rate=ain.sample_rate, layout=layout)
+                self.mode, self.codec = "encode", encoder
+                logger.info("%s: %s audio re-encoded as %s (the container cannot hold %s)",
+                            target, name, encoder, name)
+            self._packets = self._src.demux(ain)
+
+    @staticmethod
+    def _encoder(container: Any, supported: Any) -> str | None:
+        for name in (container.default_audio_codec, *_AUDIO_ENCODERS):
+            if not name or name not in supported:
+                continue
+            try:
+                codec = av.codec.Codec(name, "w")
+            except Exception:  # noqa: BLE001 - unknown codec names raise various errors
+                continue
+            if codec.type == "audio" and not codec.experimental:
+                return name
+        return None
+
+    def _time(self, packet: Any) -> float | None:
+        ts = packet.pts if packet.pts is not None else packet.dts
+        if ts is None or packet.time_base is None:
+            return None
+        return float(ts * packet.time_base) - self._offset
+
+    def _emit(self, packet: Any, container: Any) -> None:
+        if self.mode == "copy":
+            if packet.size == 0:
+                return
+            if self._offset:
+                shift = round(self._offset / packet.time_base)
+                if packet.pts is not None:
+                    packet.pts -= shift
+                if packet.dts is not None:
+                    packet.dts -= shift
+            packet.stream = self.out
+            container.mux(packet)
+            return
+        for frame in packet.decode():
+            t = float(frame.pts * frame.time_base) - self._offset if frame.pts is not None else None
+            if t is not None:
+                frame.pts = round(t * frame.sample_rate)
+                frame.time_base = Fraction(1, frame.sample_rate)
+            for out in self.out.encode(frame):
+                container.mux(out)
+
+    def mux_until(self, seconds: float | None) -> None:
+        """Mux the source's audio packets that start before ``seconds`` (None: all)."""
+        if self._src is None:
+            return
+        container = self._container
+        with _av_errors(self.source, "copy the audio"):
+            while True:
+                packet = self._pending
+                self._pending = None
+                if packet is None:
+                    packet = next(self._packets, None)
+                    if packet is None:
+                        return
+                t = self._time(packet)
+                if seconds is not None and t is not None and t >= seconds and packet.size:
+                    self._pending = packet
+                    return
+                self._emit(packet, container)
+
+    def finish(self) -> None:
+        """Mux the rest of the audio and flush the encoder, then close the source."""
+        if self._src is None:
+            return
+        self.mux_until(None)
+        if self.mode == "encode":
+            with _av_errors(self.source, "copy the audio"):
+                for out in self.out.encode(None):
+                    self._container.mux(out)
+        self.close()
+
+    def close(self) -> None:
+        if self._src is not None:
+            with contextlib.suppress(*_AV_ERRORS):
+                self._src.close()
+        self._src = None
+
+
 class VideoWriter:
     """Encode frames into a video file, atomically.
 
@@ -1060,19 +1285,38 @@ class VideoWriter:
         where the encoder offers it, else ``yuv420p``.
     quality : int, optional
         Constant-quality setting, lower is better: CRF for ``libx264``/``libx265``
-        (0..51, default 18/20) and ``libvpx(-vp9)`` (0..63, default 30 for VP9),
-        the quantiser scale for ``mpeg4``/``mjpeg`` (1..31, default 2).  Ignored
-        (with a log message) by lossless encoders.
+        (0..51, default 18/20; ``libx264rgb``: default 23, 0 is lossless) and
+        ``libvpx(-vp9)`` (0..63, default 30 for VP9), the quantiser scale for
+        ``mpeg4``/``mjpeg`` (1..31, default 2).  Ignored (with a log message) by
+        lossless encoders.
     options : mapping of str to str, optional
         Further encoder options, e.g. ``{"g": "12", "bf": "2", "preset": "fast"}``;
         they override the ones derived from ``quality``.
+    audio : str or path-like, optional
+        A media file whose first audio stream is copied into the output (none by
+        default; a file without audio adds none).  Its packets are remuxed
+        unchanged when the container can hold the codec, else decoded and
+        re-encoded with the first encoder of the container's default audio codec,
+        AAC, Opus, Vorbis, MP3 or FLAC it accepts (:attr:`audio_mode` says which);
+        they are interleaved with the video by time, shifted so that the source's
+        first video frame and the output's coincide, and the whole stream is
+        copied (it is not cut to the video's length).
+
+    Attributes
+    ----------
+    audio_mode : str or None
+        After the first frame: ``"copy"``, ``"encode"`` or None (no audio).
+    audio_codec : str or None
+        The output's audio codec.
 
     Raises
     ------
     ValueError
         Unknown extension or encoder, unsupported pixel format, bad ``fps`` or
         ``quality``; from :meth:`write`, frames of another shape or dtype than the
-        first one or an encoder error.
+        first one or an encoder error; an unreadable ``audio`` file, or an audio
+        codec the container cannot hold when no encoder for one it can is
+        installed.
     FileNotFoundError
         If the target directory does not exist.
 
@@ -1103,6 +1347,7 @@ class VideoWriter:
         pix_fmt: str | None = None,
         quality: int | None = None,
         options: Mapping[str, str] | None = None,
+        audio: PathLike | None = None,
     ) -> None:
         self.path = Path(os.fspath(path))
         ext = self.path.suffix.lower()
@@ -1151,6 +1396,10 @@ class VideoWriter:
         self._stream: Any = None
         self._tmp: Path | None = None
         self._closed = False
+        self._audio_source = None if audio is None else _check_video_path(audio)
+        self._audio: _AudioCopy | None = None
+        self.audio_mode: str | None = None
+        self.audio_codec: str | None = None
 
     def _codec_options(self, quality: int | None) -> dict[str, str]:
         name = self.codec
@@ -1224,6 +1473,9 @@ class VideoWriter:
             stream.pix_fmt = pix_fmt
             self._stream = stream
             self._frame_time_base = Fraction(1, 1) / self._rate
+        if self._audio_source is not None:
+            self._audio = _AudioCopy(self._audio_source, self._container, self.path)
+            self.audio_mode, self.audio_codec = self._audio.mode, self._audio.codec
         self.pix_fmt = pix_fmt
         self._shape = arr.shape
         self._dtype = arr.dtype
@@ -1268,6 +1520,8 @@ class VideoWriter:
             for packet in self._stream.encode(vframe):
                 self._container.mux(packet)
         self.frames_written += 1
+        if self._audio is not None:
+            self._audio.mux_until(self.frames_written / self._rate)
 
     def close(self) -> None:
         """Flush the encoder and move the finished file onto the target.
@@ -1287,6 +1541,9 @@ class VideoWriter:
             with _av_errors(self.path, f"write the video with {self.codec}"):
                 for packet in self._stream.encode(None):
                     self._container.mux(packet)
+                if self._audio is not None:
+                    self._audio.finish()
+                    self._audio = None
                 self._container.close()
             self._container = None
             assert self._tmp is not None
@@ -1312,6 +1569,9 @@ class VideoWriter:
     def abort(self) -> None:
         """Stop writing and delete the temporary file; the target is left untouched."""
         self._closed = True
+        if self._audio is not None:
+            self._audio.close()
+            self._audio = None
         if self._container is not None:
             with contextlib.suppress(Exception):
                 self._container.close()
