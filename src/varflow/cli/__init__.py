@@ -75,9 +75,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                         help="log to stderr: -v INFO, -vv DEBUG")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
                                 parser_class=_Parser)
-    from . import batch, bench, flow, report, track, video
+    from . import batch, bench, flow, interpolate, report, track, video
 
-    for module in (flow, track, bench, video, batch, report):  # each: add_parser(sub, common, argv)
+    for module in (flow, track, interpolate, bench, video, batch, report):  # add_parser(...)
         module.add_parser(sub, common, argv)
     return parser
 
