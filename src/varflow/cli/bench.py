@@ -16,6 +16,11 @@ Synopsis::
                              [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
                              [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
                              [--quiet] [--<parameter> VALUE ...]
+    varflow bench interpolation [--sets middlebury,ucf101,sintel]
+                             [--split tuning|reporting|all] [--methods naive,...]
+                             [--peers minterpolate,blend,repeat|all|none] [--max-cases N]
+                             [--timing|--no-timing] [--timing-only] [--timing-repeats N]
+                             [--no-per-case] [--data DIR] [--csv OUT.csv] [--quiet]
 """
 
 from __future__ import annotations
@@ -207,6 +212,50 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                    help="skip the RubberWhale frame-11 table")
     _add_param_flags(b, tparams, TRACKERS, chosen_methods(argv, TRACKERS))
     b.set_defaults(func=_cmd_bench_sintel_trajectories)
+
+    from ..evaluation.interpolation_peers import INTERPOLATION_PEERS
+    from ..evaluation.interpolation_sets import INTERPOLATION_SETS
+    from ..retime.methods import INTERPOLATORS
+
+    b = bsub.add_parser("interpolation", parents=[common, bench_common],
+                        help="frame interpolation against the true in-between frame "
+                        "(Middlebury, UCF101, MPI-Sintel), with FFmpeg minterpolate",
+                        description="Interpolation methods (varflow.interpolate) and peers "
+                        "(FFmpeg minterpolate via PyAV, blend, repeat) synthesise the frame "
+                        "halfway between two frames; it is scored against the true one: "
+                        "PSNR and SSIM, Baker et al.'s IE and NE, and MAE (the mean "
+                        "absolute difference learned methods call 'IE'), all on 0-255.  Sets: "
+                        "the 12 Middlebury interpolation sequences, 21 UCF101 triplets and "
+                        "MPI-Sintel final/alley_1 (odd frames from their neighbours; methods "
+                        "that use context get frames i-3 and i+3).  In each set the sorted "
+                        "cases alternate tuning (even positions) / reporting (odd).  Per set: "
+                        "a per-case table and the means, the PSNR gain over minterpolate and "
+                        "over naive, the cases won against minterpolate and median seconds; "
+                        "then the seconds per 960x540 frame of every method and peer.")
+    b.add_argument("--sets", default=",".join(INTERPOLATION_SETS), metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(INTERPOLATION_SETS)} (default all)")
+    b.add_argument("--split", choices=("tuning", "reporting", "all"), default="reporting",
+                   help="which cases of each set (default reporting)")
+    b.add_argument("--methods", default=None, metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(INTERPOLATORS)} (default all "
+                   "registered; empty to run peers only)")
+    b.add_argument("--peers", default=",".join(INTERPOLATION_PEERS), metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(INTERPOLATION_PEERS)}; or all, or "
+                   "none (default all)")
+    b.add_argument("--max-cases", type=int, default=None, metavar="N",
+                   help="only the first N cases of each set (quick runs)")
+    b.add_argument("--timing", action=argparse.BooleanOptionalAction, default=True,
+                   help="also time every method and peer on one pair at 960x540 (default on)")
+    b.add_argument("--timing-only", action="store_true",
+                   help="only the timing section, no cases")
+    b.add_argument("--timing-repeats", type=int, default=3, metavar="N",
+                   help="timed runs per method, after an untimed one; the median is "
+                   "reported (default 3)")
+    b.add_argument("--per-case", action=argparse.BooleanOptionalAction, default=True,
+                   help="print the per-case tables (default on)")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    b.set_defaults(func=_cmd_bench_interpolation)
 
 
 def _checked_methods(value: str, lookup, what: str) -> list[str]:
@@ -530,4 +579,77 @@ def _cmd_bench_sintel_trajectories(args: argparse.Namespace) -> int:
         print(format_multiframe_table(mrows))
         rows = rows + mrows
     _write_rows(rows, csv_path)
+    return 0
+
+
+def _cmd_bench_interpolation(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench.interpolation import (
+        check_methods,
+        check_peers,
+        format_tables,
+        format_timing_table,
+        run_interpolation_bench,
+        run_interpolation_timing,
+    )
+    from varflow.evaluation.datasets import data_root
+    from varflow.evaluation.interpolation_sets import check_sets, interpolation_cases
+
+    def option(exc: ValueError) -> ValueError:  # "sets: ..." -> "--sets: ..."
+        arg, _, rest = str(exc).partition(":")
+        names = {"sets": "--sets", "split": "--split", "peers": "--peers",
+                 "methods": "--methods", "max_cases": "--max-cases",
+                 "repeats": "--timing-repeats"}
+        return ValueError(f"{names.get(arg, arg)}:{rest}")
+
+    try:
+        sets = check_sets(args.sets)
+        methods = check_methods(args.methods)
+        peers = check_peers(args.peers)
+    except ValueError as exc:
+        raise option(exc) from None
+    if not methods and not peers:
+        raise ValueError("--methods: give at least one interpolation method or peer")
+    if args.max_cases is not None and args.max_cases < 1:
+        raise ValueError(f"--max-cases: must be at least 1, got {args.max_cases}")
+    if args.timing_repeats < 1:
+        raise ValueError(f"--timing-repeats: must be at least 1, got {args.timing_repeats}")
+    if args.timing_only and not args.timing:
+        raise ValueError("--timing-only: contradicts --no-timing")
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    if not args.timing_only:
+        for s in sets:  # fail on missing data before any run
+            interpolation_cases(s, args.split, root)
+    names = ", ".join(methods + peers)
+    rows: list[dict[str, Any]] = []
+    if not args.timing_only:
+        print(f"Frame interpolation at t = 0.5 ({', '.join(sets)}; {args.split} split"
+              + (f", first {args.max_cases} cases per set" if args.max_cases else "")
+              + f"): {names}.  PSNR (dB, RGB) and SSIM (Gaussian 11x11, sigma 1.5, mean "
+              f"over channels) on 0-255; IE: Baker et al. RMS colour error, NE: IE with "
+              f"each pixel divided by |grad I_gt|^2 + 1, MAE: mean absolute error (the "
+              f"'IE' of learned methods); s: seconds per frame, JIT warm-up excluded; "
+              f"data {root}")
+        try:
+            rows = run_interpolation_bench(sets, args.split, methods, peers, root=root,
+                                           max_cases=args.max_cases,
+                                           progress=not args.quiet)
+        except ValueError as exc:
+            raise option(exc) from None
+        print()
+        print(format_tables(rows, per_case=args.per_case))
+    timing: list[dict[str, Any]] = []
+    if args.timing:
+        timing = run_interpolation_timing(methods, peers, root=root,
+                                          repeats=args.timing_repeats,
+                                          progress=not args.quiet)
+        if rows:
+            print()
+        print(format_timing_table(timing))
+    if csv_path is not None:
+        from varflow.evaluation.bench.common import write_csv
+        from varflow.evaluation.bench.interpolation import INTERPOLATION_CSV_FIELDS
+
+        write_csv(rows + timing, csv_path, INTERPOLATION_CSV_FIELDS)
+        print(f"wrote {csv_path}")
     return 0
