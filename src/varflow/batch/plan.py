@@ -18,6 +18,11 @@ Trajectories (``varflow batch track``)
     one window of all its frames.  Each window's trajectories (reference = the
     window's centre frame, :func:`varflow.multiframe.track.default_ref`) go to
     ``OUT/<name>/window_ssssss.npz`` with ``s`` the window's first frame.
+
+Retiming (``varflow batch retime``)
+    One task per input: the whole video (or frame folder) retimed with
+    :func:`varflow.retime.stream.retime_video` (``--fps F`` or ``--slowmo K``) to
+    ``OUT/<name>.<format>`` (``mkv`` by default: lossless FFV1).
 """
 
 from __future__ import annotations
@@ -41,6 +46,8 @@ __all__ = [
 
 #: Output formats of ``varflow batch flow``.
 FLOW_FORMATS = ("flo", "png")
+#: Output formats (video containers) of ``varflow batch retime``.
+RETIME_FORMATS = ("mkv", "mp4", "mov", "avi", "webm", "m4v")
 
 
 @dataclass(frozen=True)
@@ -50,19 +57,29 @@ class BatchConfig:
     Attributes
     ----------
     kind : str
-        ``"flow"`` or ``"track"``.
+        ``"flow"``, ``"track"`` or ``"retime"``.
     method : str
-        Registered two-frame method (flow) or trajectory method (track).
+        Registered two-frame method (flow), trajectory method (track) or
+        interpolation method (retime).
     params : dataclass instance
         The method's parameters.
     fmt : str
-        ``"flo"`` or ``"png"`` for flow; ``"npz"`` for track.
+        ``"flo"`` or ``"png"`` for flow; ``"npz"`` for track; a video extension of
+        :data:`RETIME_FORMATS` for retime.
     stride : int
         Frame gap of the pairs (flow without ``pairs``).
     pairs : tuple of (int, int), optional
         Explicit pairs (flow).
     window, overlap : int, optional
         Window length and overlap in frames (track).
+    fps : str, optional
+        Output frame rate (retime), e.g. ``"60"`` or ``"24000/1001"``.
+    slowmo : int, optional
+        Slow-motion factor (retime; exactly one of ``fps`` and ``slowmo``).
+    input_fps : str, optional
+        Source rate of frame folders / override of the videos' rates (retime).
+    codec : str, optional
+        Video encoder (retime; default after ``fmt``).
     """
 
     kind: str
@@ -73,6 +90,10 @@ class BatchConfig:
     pairs: tuple[tuple[int, int], ...] | None = None
     window: int | None = None
     overlap: int | None = None
+    fps: str | None = None
+    slowmo: int | None = None
+    input_fps: str | None = None
+    codec: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind == "flow":
@@ -90,6 +111,13 @@ class BatchConfig:
                 )
             if self.fmt != "npz":
                 raise ValueError("track outputs are .npz files")
+        elif self.kind == "retime":
+            if self.fmt not in RETIME_FORMATS:
+                raise ValueError(f"--format: expected one of {', '.join(RETIME_FORMATS)}")
+            if (self.fps is None) == (self.slowmo is None):
+                raise ValueError("give exactly one of --fps and --slowmo")
+            if self.slowmo is not None and (isinstance(self.slowmo, bool) or self.slowmo < 2):
+                raise ValueError(f"--slowmo: must be an integer >= 2, got {self.slowmo}")
         else:
             raise ValueError(f"unknown batch kind {self.kind!r}")
 
@@ -112,6 +140,9 @@ class BatchConfig:
                 ident["pairs"] = [list(p) for p in self.pairs]
             else:
                 ident["stride"] = self.stride
+        elif self.kind == "retime":
+            ident.update({"fps": self.fps, "slowmo": self.slowmo, "input_fps": self.input_fps,
+                          "codec": self.codec})
         else:
             ident["window"] = self.window
             ident["overlap"] = self.overlap
@@ -147,7 +178,7 @@ class Task:
         The input's output name.
     frames : tuple of int
         ``(i, j)`` for a pair (flow from frame i to frame j), the window's frame
-        indices for track.
+        indices for track, the first and last frame for retime.
     output : str
         Output path relative to the output folder (``/``-separated).
     index : int
@@ -295,6 +326,11 @@ def plan_tasks(name: str, n_frames: int, config: BatchConfig) -> list[Task]:
         When the input is too short to give any task.
     """
     tasks: list[Task] = []
+    if config.kind == "retime":
+        if n_frames < 2:
+            raise ValueError(f"only {n_frames} frame(s): retiming needs at least 2")
+        file = f"{name}.{config.fmt}"
+        return [Task(f"{name}/{file}", name, (0, n_frames - 1), file, 0)]
     if config.kind == "flow":
         if config.pairs is not None:
             for k, (i, j) in enumerate(config.pairs):

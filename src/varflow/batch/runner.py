@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import glob
 import logging
 import os
 import shutil
@@ -92,7 +93,7 @@ class BatchSummary:
     seconds : float
         Wall time of the computing phase.
     unit : str
-        ``"pairs"`` or ``"windows"``.
+        ``"pairs"``, ``"windows"`` or ``"videos"`` (retime).
     failures : list of (str, str)
         ``(task_id, error)`` of every failure.
     """
@@ -169,10 +170,15 @@ def _discard(out: Path, entries: list[str]) -> None:
                 d.rmdir()
 
 
-def _clean_stale(out: Path, names: Sequence[str]) -> int:
+def _clean_stale(out: Path, names: Sequence[str], kind: str = "flow") -> int:
     """Delete temporary files of killed writers; returns how many."""
     count = 0
     for name in names:
+        if kind == "retime":  # OUT/.<name>.XXXX.<ext> of the video writer
+            for p in out.glob(f".{glob.escape(name)}.*"):
+                if p.is_file():
+                    p.unlink(missing_ok=True)
+                    count += 1
         d = out / name
         if d.is_dir():
             for p in d.iterdir():
@@ -304,7 +310,7 @@ def _sink_write(sink: Any, task: Task, manifest: Manifest, summary: BatchSummary
 def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
                version: str) -> WorkItem:
     source: str | tuple[str, ...]
-    if pl.probe.files is not None:
+    if pl.probe.files is not None and config.kind != "retime":
         source = tuple(pl.probe.files[i] for i in task.frames)
     else:
         source = str(pl.inp.path)
@@ -318,6 +324,9 @@ def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
         output=str(out / task.output),
         fmt=config.fmt,
         metadata={"input": str(pl.inp.path), "name": pl.inp.name, "version": version},
+        retime=None if config.kind != "retime" else {
+            "fps": config.fps, "slowmo": config.slowmo, "input_fps": config.input_fps,
+            "codec": config.codec},
     )
 
 
@@ -478,7 +487,8 @@ def run_batch(
 
     out = Path(os.fspath(out))
     out.mkdir(parents=True, exist_ok=True)
-    summary = BatchSummary(unit="pairs" if config.kind == "flow" else "windows")
+    summary = BatchSummary(unit={"flow": "pairs", "track": "windows"}.get(config.kind,
+                                                                          "videos"))
     identity = config.identity(version)
     params_hash = config.identity_hash(version)
     fingerprint = config.fingerprint(version)
@@ -494,7 +504,7 @@ def run_batch(
             manifest.reset()
         manifest.record_settings(identity, params_hash, command, fingerprint)
         planned = _plan(inputs, config, manifest, out, version, summary, overwrite)
-        _clean_stale(out, [pl.inp.name for pl in planned])
+        _clean_stale(out, [pl.inp.name for pl in planned], config.kind)
         sink = None
         if zarr:
             from .zarrsink import ZarrSink

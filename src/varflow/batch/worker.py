@@ -2,8 +2,9 @@
 
 A task reads only the frames it needs (a video is opened with
 ``read_frames(path, start=..., stop=..., step=...)``, a frame folder by the task's
-own frame files), writes its output with the atomic writers of :mod:`varflow.io`
-and returns a small result dictionary; it never touches the manifest.
+own frame files; a retime task streams its whole input through
+:func:`varflow.retime.stream.retime_video`), writes its output with the atomic
+writers of :mod:`varflow.io` and returns a small result dictionary; it never touches the manifest.
 
 Threads: every task runs single-threaded (Numba, OpenCV); a worker runs as many
 tasks at once as it has threads.  :func:`thread_environment` gives the variables
@@ -95,7 +96,7 @@ class WorkItem:
     ----------
     task_id : str
     kind : str
-        ``"flow"`` or ``"track"``.
+        ``"flow"``, ``"track"`` or ``"retime"``.
     method : str
     params : dataclass instance
     source : str or tuple of str
@@ -110,6 +111,9 @@ class WorkItem:
         Extra metadata stored in ``.npz`` outputs (input path, name, version).
     threads : int
         Threads per task for Numba/OpenCV.
+    retime : dict, optional
+        ``fps``, ``slowmo``, ``input_fps``, ``codec`` of a retime task (``source``
+        is then the video or the frame folder).
     """
 
     task_id: str
@@ -122,6 +126,7 @@ class WorkItem:
     fmt: str
     metadata: dict[str, Any] = field(default_factory=dict)
     threads: int = 1
+    retime: dict[str, Any] | None = None
 
 
 def sha256_file(path: str | os.PathLike[str]) -> str:
@@ -161,8 +166,15 @@ def _read(item: WorkItem) -> Any:
 def _compute(item: WorkItem) -> None:
     import varflow
 
-    frames = _read(item)
     out = Path(item.output)
+    if item.kind == "retime":
+        from varflow.retime.stream import retime_video
+
+        assert item.retime is not None and isinstance(item.source, str)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        retime_video(item.source, out, method=item.method, params=item.params, **item.retime)
+        return
+    frames = _read(item)
     out.parent.mkdir(parents=True, exist_ok=True)
     if item.kind == "flow":
         flow = varflow.flow(frames[0], frames[1], item.method, params=item.params)

@@ -9,6 +9,10 @@ Synopsis::
     varflow batch track INPUT... -o OUT --window F --overlap K [--method M]
                         [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
                         [--zarr] [--overwrite] [--quiet] [--<parameter> VALUE ...]
+    varflow batch retime INPUT... -o OUT (--fps F | --slowmo K) [--method M]
+                         [--input-fps R] [--format mkv|mp4|...] [--codec C]
+                         [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
+                         [--overwrite] [--quiet] [--<parameter> VALUE ...]
 
 Needs the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``);
 without it the command stops with one line naming the extra.
@@ -27,6 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from ..registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
+from ..retime.methods import (
+    DEFAULT_INTERPOLATOR,
+    INTERPOLATORS,
+    get_interpolator,
+    make_interp_params,
+)
 from ._common import (
     MissingExtraError,
     _add_param_flags,
@@ -43,13 +53,14 @@ __all__ = ["add_parser", "require_batch_extra"]
 BATCH_EXTRA = ("dask", "distributed", "zarr")
 
 _DESCRIPTION = (
-    "Compute flow between frame pairs (flow) or trajectories over windows of frames "
-    "(track) for many inputs on Dask: a local cluster of --workers processes by default, "
-    "or an existing scheduler.  INPUT is a video, a folder of frames, a folder of videos, "
-    "a glob pattern or "
+    "Compute flow between frame pairs (flow), trajectories over windows of frames "
+    "(track) or retimed videos (retime) for many inputs on Dask: a local cluster of "
+    "--workers processes by default, or an existing scheduler.  INPUT is a video, a "
+    "folder of frames, a folder of videos, a glob pattern or "
     "an input list (.txt/.lst/.list/.jsonl: one path or {\"path\": ..., \"name\": ...} "
-    "per line); results go to OUT/<name>/ with <name> the video's file name without "
-    "extension or the folder's name (two inputs with one name are an error).  Every "
+    "per line); results go to OUT/<name>/ (retime: OUT/<name>.<format>) with <name> the "
+    "video's file name without extension or the folder's name (two inputs with one name "
+    "are an error).  Every "
     "task is recorded in OUT/manifest.sqlite; running the same command again after an "
     "interruption computes only the unfinished tasks.  A run into an OUT made with other "
     "settings is refused unless --overwrite."
@@ -67,6 +78,28 @@ def _non_negative(text: str) -> int:
     value = int(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _rate(text: str) -> Any:
+    from ..retime.schedule import parse_rate
+
+    try:
+        return parse_rate(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive rate such as 60 or 24000/1001, got {text!r}") from None
+
+
+def _rate_text(rate: Any) -> str | None:
+    """An exact rate as ``"num/den"`` (recorded in the manifest), None for None."""
+    return None if rate is None else f"{rate.numerator}/{rate.denominator}"
+
+
+def _slowmo(text: str) -> int:
+    value = int(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 2, got {value}")
     return value
 
 
@@ -90,12 +123,12 @@ def require_batch_extra() -> None:
 
 
 def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
-    """Register ``varflow batch flow`` and ``varflow batch track``.
+    """Register ``varflow batch flow``, ``varflow batch track`` and ``varflow batch retime``.
 
     The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
     ``common`` and ``argv`` are).
     """
-    p = sub.add_parser("batch", help="flow or trajectories for many videos on Dask",
+    p = sub.add_parser("batch", help="flow, trajectories or retiming for many videos on Dask",
                        description=_DESCRIPTION)
     bsub = p.add_subparsers(dest="batch_kind", metavar="KIND", required=True,
                             parser_class=_Parser)
@@ -153,6 +186,29 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     _add_param_flags(t, _collect_params(TRACKERS), TRACKERS, chosen_methods(argv, TRACKERS))
     t.set_defaults(func=_cmd_batch_track)
 
+    r = bsub.add_parser("retime", parents=[common, shared],
+                        help="retimed videos: OUT/<name>.<format>",
+                        description="Retime every input (a video or a folder of frames) to "
+                        "a new frame rate (--fps) or to slow motion (--slowmo): one task per "
+                        "input, written to OUT/<name>.<format> (as 'varflow retime', audio "
+                        "copied when the duration is kept).")
+    x = r.add_mutually_exclusive_group(required=True)
+    x.add_argument("--fps", type=_rate, metavar="F",
+                   help="output frame rate, e.g. 60 or 24000/1001")
+    x.add_argument("--slowmo", type=_slowmo, metavar="K",
+                   help="slow motion: K-1 new frames between every two (K >= 2)")
+    r.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
+                   help=f"one of: {', '.join(INTERPOLATORS)} (default {DEFAULT_INTERPOLATOR})")
+    r.add_argument("--input-fps", type=_rate, metavar="R",
+                   help="source frame rate (default: the video's own; 25 for a folder)")
+    r.add_argument("--format", default="mkv", metavar="EXT",
+                   help="output container: mkv (lossless FFV1, default), mp4, mov, avi, "
+                   "webm or m4v")
+    r.add_argument("--codec", metavar="C", help="FFmpeg encoder (default after the format)")
+    _add_param_flags(r, _collect_params(INTERPOLATORS), INTERPOLATORS,
+                     chosen_methods(argv, INTERPOLATORS))
+    r.set_defaults(func=_cmd_batch_retime)
+
 
 def _cmd_batch_flow(args: argparse.Namespace) -> int:
     require_batch_extra()
@@ -177,6 +233,20 @@ def _cmd_batch_track(args: argparse.Namespace) -> int:
     return _run(args, config)
 
 
+def _cmd_batch_retime(args: argparse.Namespace) -> int:
+    require_batch_extra()
+    from ..batch.plan import BatchConfig
+
+    if args.zarr:
+        raise ValueError("--zarr: not available for batch retime (its outputs are videos)")
+    interp = get_interpolator(args.method)
+    params = make_interp_params(interp, **_own_params(args, interp, "interpolation method"))
+    config = BatchConfig("retime", interp.name, params, fmt=args.format.lower().lstrip("."),
+                         fps=_rate_text(args.fps), slowmo=args.slowmo,
+                         input_fps=_rate_text(args.input_fps), codec=args.codec)
+    return _run(args, config)
+
+
 _MAX_LISTED = 20
 
 
@@ -192,7 +262,7 @@ def _run(args: argparse.Namespace, config: Any) -> int:
         raise NotADirectoryError(20, "-o/--output: not a directory", str(out))
     inputs = expand_inputs(args.inputs)
     command = {k: v for k, v in vars(args).items() if k != "func"}
-    unit = "pair" if config.kind == "flow" else "window"
+    unit = {"flow": "pair", "track": "window"}.get(config.kind, "video")
     with _Progress(f"batch {config.kind}", args.quiet, unit=unit) as progress:
         summary = run_batch(
             inputs, out, config,
