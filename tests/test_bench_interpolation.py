@@ -176,7 +176,7 @@ def test_context_methods_get_the_neighbours(fake_root: Path, monkeypatch) -> Non
     seen: list[tuple[bool, bool]] = []
 
     def prepare(frame0, frame1, params, previous=None, following=None, callback=None,
-                stats=None):
+                stats=None, cache=None):
         seen.append((previous is not None, following is not None))
         return _BlendMotion(frame0, frame1)
 

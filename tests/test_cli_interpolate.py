@@ -172,6 +172,6 @@ def test_help_lists_the_interpolation_parameters(capsys: pytest.CaptureFixture[s
     assert rc == 0
     text = " ".join(out.split())
     assert "--flow-method STR" in text and "--data-weight FLOAT" in text
-    assert "(default tvl1)" in text
+    assert "(default tvl1; splat: tvl1-ld)" in text
     rc, out, _ = run(capsys, "--help")
     assert rc == 0 and "interpolate" in out and "retime" in out

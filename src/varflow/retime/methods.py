@@ -24,6 +24,8 @@ import numpy as np
 from .._validate import check_field
 from ..multiframe.track import FlowTrackParams
 from ..twoframe.coarse_to_fine import ProgressCallback
+from .motion import FlowCache, PairMotion, bidirectional_flows
+from .splatting import SplatParams, prepare_splat
 
 __all__ = [
     "DEFAULT_INTERPOLATOR",
@@ -38,28 +40,6 @@ __all__ = [
 ]
 
 
-class PairMotion:
-    """The motion of one pair of frames, estimated once, from which frames are rendered.
-
-    Subclasses implement :meth:`render`.
-
-    Attributes
-    ----------
-    frame0, frame1 : ndarray, shape (H, W, C), float32
-        The two frames (uint8 / uint16 inputs divided by 255 / 65535, float inputs
-        as they are).
-    """
-
-    def __init__(self, frame0: np.ndarray, frame1: np.ndarray) -> None:
-        self.frame0 = frame0
-        self.frame1 = frame1
-
-    def render(self, t: float) -> np.ndarray:
-        """The frame at time ``t`` (0 < t < 1), shape (H, W, C), float32, the units of
-        :attr:`frame0`."""
-        raise NotImplementedError
-
-
 @dataclass(frozen=True)
 class Interpolator:
     """A registered frame-interpolation method.
@@ -71,10 +51,12 @@ class Interpolator:
         Frozen dataclass of its parameters.
     prepare : callable
         ``prepare(frame0, frame1, params, previous=None, following=None,
-        callback=None, stats=None) -> PairMotion``; frames (H, W, C) float32 as
-        :class:`PairMotion` holds them; ``previous`` / ``following`` the frames
-        before ``frame0`` and after ``frame1`` when the caller has them (methods
-        with :attr:`context` 1 use them, the others ignore them).
+        callback=None, stats=None, cache=None) -> PairMotion``; frames (H, W, C)
+        float32 as :class:`PairMotion` holds them; ``previous`` / ``following``
+        the frames before ``frame0`` and after ``frame1`` when the caller has them
+        (methods with :attr:`context` 1 use them, the others ignore them);
+        ``cache`` a :class:`~varflow.retime.motion.FlowCache` through which the
+        flows are estimated.
     description : str
     context : int
         Frames each side of the pair the method can use (0 or 1).
@@ -127,40 +109,11 @@ class _NaiveMotion(PairMotion):
         return (1 - t) * w0 + t * w1
 
 
-def bidirectional_flows(frame0: np.ndarray, frame1: np.ndarray, params: FlowTrackParams,
-                        callback: ProgressCallback | None = None,
-                        stats: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The flows 0→1 and 1→0 of ``params.flow_method`` (as :func:`varflow.flow`).
-
-    Returns
-    -------
-    f01, f10 : ndarray, shape (H, W, 2), float32
-    """
-    from ..twoframe.methods import METHODS, run_method
-
-    m = METHODS[params.flow_method]
-    done = [0]
-
-    def tick(k: int, total: int) -> None:  # two flows: one progress range
-        if callback is not None:
-            callback(done[0] + k, 2 * total)
-
-    f01 = run_method(m, frame0, frame1, params.flow_params, callback=tick)
-    if callback is not None:
-        done[0] = 0
-    f10 = run_method(m, frame1, frame0, params.flow_params,
-                     callback=None if callback is None else
-                     (lambda k, total: callback(total + k, 2 * total)))
-    if stats is not None:
-        stats["flows"] = stats.get("flows", 0) + 2
-    return f01, f10
-
-
 def _prepare_naive(frame0: np.ndarray, frame1: np.ndarray, params: NaiveParams,
                    previous: np.ndarray | None = None, following: np.ndarray | None = None,
-                   callback: ProgressCallback | None = None,
-                   stats: dict | None = None) -> PairMotion:
-    f01, f10 = bidirectional_flows(frame0, frame1, params, callback, stats)
+                   callback: ProgressCallback | None = None, stats: dict | None = None,
+                   cache: FlowCache | None = None) -> PairMotion:
+    f01, f10 = bidirectional_flows(frame0, frame1, params, callback, stats, cache)
     return _NaiveMotion(frame0, frame1, f01, f10)
 
 
@@ -173,6 +126,15 @@ INTERPOLATORS: dict[str, Interpolator] = {
         prepare=_prepare_naive,
         description="varflow.flow both ways, linear flows at time t, backward warps "
         "blended by time (the simple baseline)",
+    ),
+    "splat": Interpolator(
+        name="splat",
+        params=SplatParams,
+        prepare=prepare_splat,
+        description="flows both ways, splatted to time t (softmax z-buffer, holes filled "
+        "outside in), occlusion-aware bicubic blend (Baker et al. 2011); quadratic "
+        "trajectories from the neighbouring frames when given (Xu et al. 2019)",
+        context=1,
     ),
 }
 
@@ -279,6 +241,7 @@ def interpolate(
     following: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
+    flow_cache: FlowCache | None = None,
     **overrides: Any,
 ) -> np.ndarray:
     """The frame (or frames) at time ``t`` between ``frame0`` (t = 0) and ``frame1`` (t = 1).
@@ -300,7 +263,10 @@ def interpolate(
     callback : callable, optional
         ``callback(done, total)`` as the motion is estimated.
     stats : dict, optional
-        Filled with counters of the run (e.g. ``flows``).
+        Filled with counters of the run (``flows`` estimated, ``cached_flows``).
+    flow_cache : FlowCache, optional
+        Flows are looked up in it and stored there (a stream of pairs shares
+        flows between neighbouring pairs).
     **overrides
         Parameter fields to change (for methods built on a two-frame method, its
         fields too, e.g. ``data_weight=30.0``).
@@ -350,6 +316,6 @@ def interpolate(
         else:
             if motion is None:
                 motion = m.prepare(w0, w1, p, previous=ctx[0], following=ctx[1],
-                                   callback=callback, stats=stats)
+                                   callback=callback, stats=stats, cache=flow_cache)
             out.append(_restore(motion.render(x), a0))
     return out[0] if scalar else np.stack(out)

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from .methods import DEFAULT_INTERPOLATOR, get_interpolator, interpolate, make_interp_params
+from .motion import FlowCache
 from .schedule import Schedule, fps_schedule, parse_rate, slowmo_schedule
 
 __all__ = [
@@ -232,7 +233,9 @@ def retime_frames(
         Filled with counters: ``read`` (source frames), ``passthrough``,
         ``interpolated``, ``cut_frames`` (outputs repeated at a cut), ``cuts``
         (pairs with output frames found to be cuts), ``pairs`` (pairs
-        interpolated), ``flows``, ``max_held`` (source frames held at once, at most
+        interpolated), ``flows`` (estimated), ``cached_flows`` (flows of a
+        neighbouring pair reused: a four-frame method estimates two flows per pair
+        once the stream is under way), ``max_held`` (source frames held at once, at most
         :data:`MAX_HELD`).
     callback : callable, optional
         ``callback(done, total)`` after every output frame.
@@ -312,6 +315,7 @@ def _retime(it: Iterator[np.ndarray], schedule: Schedule, interp: Any, p: Any,
         return si is not None and _decide(si, score(i - 1), score(i + 1), CUT_THRESHOLD,
                                           CUT_RATIO)
 
+    cache = FlowCache()  # neighbouring pairs share flows: each is estimated once
     done = 0
     total = schedule.n_output
     for step in schedule.steps():
@@ -336,7 +340,8 @@ def _retime(it: Iterator[np.ndarray], schedule: Schedule, interp: Any, p: Any,
                     if i + 2 in held and not is_cut(i + 1):
                         following = held[i + 2]
                 outs = interpolate(held[i], held[i + 1], step.times, interp.name, params=p,
-                                   previous=previous, following=following, stats=stats)
+                                   previous=previous, following=following, stats=stats,
+                                   flow_cache=cache)
                 stats["pairs"] += 1
                 stats["interpolated"] += len(step.frames)
         for out in outs:

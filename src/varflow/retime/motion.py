@@ -1,0 +1,162 @@
+"""What every interpolation method estimates once per pair: :class:`PairMotion`.
+
+A method's ``prepare`` returns a :class:`PairMotion`; its ``render(t)`` synthesises
+the frame at any ``t`` from it.  :func:`pair_flows` computes flows between frames
+with a registered two-frame method, as :func:`varflow.flow` does, through an
+optional :class:`FlowCache`: a retimed video asks for the flows of consecutive
+pairs (and of their neighbours, for the four-frame methods) and each is estimated
+once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..multiframe.track import FlowTrackParams
+from ..twoframe.coarse_to_fine import ProgressCallback
+
+__all__ = ["FlowCache", "PairMotion", "bidirectional_flows", "pair_flows"]
+
+
+class PairMotion:
+    """The motion of one pair of frames, estimated once, from which frames are rendered.
+
+    Subclasses implement :meth:`render`.
+
+    Attributes
+    ----------
+    frame0, frame1 : ndarray, shape (H, W, C), float32
+        The two frames (uint8 / uint16 inputs divided by 255 / 65535, float inputs
+        as they are).
+    """
+
+    def __init__(self, frame0: np.ndarray, frame1: np.ndarray) -> None:
+        self.frame0 = frame0
+        self.frame1 = frame1
+
+    def render(self, t: float) -> np.ndarray:
+        """The frame at time ``t`` (0 < t < 1), shape (H, W, C), float32, the units of
+        :attr:`frame0`."""
+        raise NotImplementedError
+
+
+def _digest(frame: np.ndarray) -> bytes:
+    a = np.ascontiguousarray(frame)
+    h = hashlib.blake2b(digest_size=16)
+    h.update(repr((a.shape, a.dtype.str)).encode())
+    h.update(a.data)
+    return h.digest()
+
+
+class FlowCache:
+    """Flows between frames, kept by the frames' content: each estimated once.
+
+    A key is the BLAKE2 digest of both frames' bytes (shape and dtype included)
+    and the method's name and parameters, so a cached flow is never returned for
+    other frames or settings.  The oldest entries are dropped beyond
+    ``max_entries``.
+
+    Parameters
+    ----------
+    max_entries : int
+        Flows kept (default 8: a four-frame method in a stream needs the last six).
+
+    Attributes
+    ----------
+    hits, misses : int
+        Flows served from the cache and estimated.
+    """
+
+    def __init__(self, max_entries: int = 8) -> None:
+        if isinstance(max_entries, bool) or not isinstance(max_entries, int) or max_entries < 1:
+            raise ValueError(f"max_entries: expected an integer >= 1, got {max_entries!r}")
+        self.max_entries = max_entries
+        self._flows: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._flows)
+
+    @staticmethod
+    def key(frame_a: np.ndarray, frame_b: np.ndarray, params: FlowTrackParams) -> tuple:
+        """The cache key of the flow from ``frame_a`` to ``frame_b``."""
+        return (_digest(frame_a), _digest(frame_b), params.flow_method, repr(params.flow_params))
+
+    def get(self, key: tuple) -> np.ndarray | None:
+        flow = self._flows.get(key)
+        if flow is not None:
+            self._flows.move_to_end(key)
+            self.hits += 1
+        return flow
+
+    def put(self, key: tuple, flow: np.ndarray) -> None:
+        self.misses += 1
+        self._flows[key] = flow
+        self._flows.move_to_end(key)
+        while len(self._flows) > self.max_entries:
+            self._flows.popitem(last=False)
+
+
+def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrackParams,
+               callback: ProgressCallback | None = None, stats: dict | None = None,
+               cache: FlowCache | None = None) -> list[np.ndarray]:
+    """The flows of ``params.flow_method`` from ``a`` to ``b`` for every pair ``(a, b)``.
+
+    Parameters
+    ----------
+    pairs : sequence of (ndarray, ndarray)
+        Frames (H, W, C) float32, as :func:`varflow.flow` takes them.
+    params : FlowTrackParams
+        The two-frame method and its parameters.
+    callback : callable, optional
+        ``callback(done, total)``: one progress range over all the flows to
+        estimate (the cached ones are not counted).
+    stats : dict, optional
+        ``flows`` (estimated) and ``cached_flows`` (served from ``cache``) are
+        incremented.
+    cache : FlowCache, optional
+
+    Returns
+    -------
+    list of ndarray, each (H, W, 2) float32
+        The cache's own arrays for cached flows: do not modify them.
+    """
+    from ..twoframe.methods import METHODS, run_method
+
+    m = METHODS[params.flow_method]
+    keys = [None if cache is None else FlowCache.key(a, b, params) for a, b in pairs]
+    out: list[np.ndarray | None] = [None if k is None else cache.get(k) for k in keys]
+    todo = [i for i, f in enumerate(out) if f is None]
+    for n, i in enumerate(todo):
+        a, b = pairs[i]
+
+        def tick(k: int, total: int, n: int = n) -> None:  # one range for all the flows
+            if callback is not None:
+                callback(n * total + k, len(todo) * total)
+
+        flow = run_method(m, a, b, params.flow_params, callback=tick)
+        if cache is not None:
+            cache.put(keys[i], flow)
+        out[i] = flow
+    if stats is not None:
+        stats["flows"] = stats.get("flows", 0) + len(todo)
+        stats["cached_flows"] = stats.get("cached_flows", 0) + len(pairs) - len(todo)
+    return out  # type: ignore[return-value]
+
+
+def bidirectional_flows(frame0: np.ndarray, frame1: np.ndarray, params: FlowTrackParams,
+                        callback: ProgressCallback | None = None, stats: dict | None = None,
+                        cache: FlowCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The flows 0→1 and 1→0 of ``params.flow_method`` (:func:`pair_flows`).
+
+    Returns
+    -------
+    f01, f10 : ndarray, shape (H, W, 2), float32
+    """
+    f01, f10 = pair_flows([(frame0, frame1), (frame1, frame0)], params, callback, stats, cache)
+    return f01, f10
