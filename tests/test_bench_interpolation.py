@@ -229,9 +229,36 @@ def test_timing_on_a_resized_pair(fake_root: Path) -> None:
     assert by["repeat"]["ratio_minterpolate"] < 1.0
     assert by["blend"]["seconds_min"] <= by["blend"]["seconds"]
     assert all(r["repeats"] == 2 for r in rows)
+    assert "alley_1 frames 5, 7, ..., 15, resized to 96x54" in rows[0]["clip"]
+    assert by["minterpolate"]["ratio_minterpolate_stream"] == pytest.approx(1.0)
+    assert all(r["seconds_stream"] > 0 for r in rows)
     _, frames = bi.timing_pair(fake_root, (54, 96))
     # writable copies, like the frames of the sets (not read-only views of PIL images)
     assert all(f.shape == (54, 96, 3) and f.flags.writeable for f in frames)
+    label, clip = bi.timing_clip(fake_root, (54, 96), n=4)
+    assert len(clip) == 4 and all(f.shape == (54, 96, 3) for f in clip)
+    text = bi.format_timing_table(rows)
+    assert "stream s/frame" in text and "x2 slow motion" in text
+
+
+def test_minterpolate_stream_matches_the_pairs() -> None:
+    """A stream gives the in-between frames in order; its first pairs are the frames
+    minterpolate gives for the pairs alone (the frame after a pair does not change
+    them)."""
+    from varflow.evaluation.interpolation_peers import minterpolate, minterpolate_stream
+
+    rng = np.random.default_rng(3)
+    frames = [np.clip(rng.normal(128, 40, (36, 44, 3)), 0, 255).astype(np.uint8)
+              for _ in range(4)]
+    out = minterpolate_stream(frames, 2)
+    assert len(out) == 3
+    for i in range(2):
+        np.testing.assert_array_equal(out[i], minterpolate(frames[i], frames[i + 1], 0.5))
+    assert len(minterpolate_stream(frames, 3)) == 6
+    with pytest.raises(ValueError, match="factor"):
+        minterpolate_stream(frames, 1)
+    with pytest.raises(ValueError, match="frames"):
+        minterpolate_stream(frames[:1], 2)
 
 
 # --------------------------------------------------------------------------- CLI

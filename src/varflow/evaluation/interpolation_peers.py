@@ -54,6 +54,7 @@ __all__ = [
     "MINTERPOLATE_OPTIONS",
     "blend",
     "minterpolate",
+    "minterpolate_stream",
     "minterpolate_times",
     "repeat",
     "time_fraction",
@@ -156,6 +157,85 @@ def _run_minterpolate(f0: np.ndarray, f1: np.ndarray, n: int) -> dict[int, np.nd
     graph.push(None)
     drain()
     return outputs
+
+
+def minterpolate_stream(frames: Sequence[np.ndarray], factor: int) -> list[np.ndarray]:
+    """FFmpeg minterpolate run over a clip: ``factor − 1`` frames between every two.
+
+    The clip is pushed through one filter graph at ``fps = factor·r``, as FFmpeg
+    retimes a video (the motion of every pair is estimated once and frames are
+    held back, so this measures its cost per frame in a stream).
+
+    Parameters
+    ----------
+    frames : sequence of ndarray, each (H, W, 3)
+        At least two uint8 RGB frames (floats in [0, 1] scaled and rounded), of
+        one size (sides below :data:`MIN_SIDE` are padded).
+    factor : int
+        At least 2.
+
+    Returns
+    -------
+    list of ndarray, each (H, W, 3), uint8
+        The ``(len(frames) − 1) (factor − 1)`` in-between frames, in order.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two frames, frames of other sizes, ``factor`` below 2.
+    RuntimeError
+        An in-between frame is missing from the filter's output.
+    """
+    import av
+
+    if isinstance(factor, bool) or not isinstance(factor, int) or factor < 2:
+        raise ValueError(f"factor: expected an integer >= 2, got {factor!r}")
+    if len(frames) < 2:
+        raise ValueError(f"frames: need at least 2, got {len(frames)}")
+    rgb = [_rgb_pair(frames[0], f)[1] for f in frames]
+    h0, w0 = rgb[0].shape[:2]
+    pad = ((0, max(0, MIN_SIDE - h0)), (0, max(0, MIN_SIDE - w0)), (0, 0))
+    if pad[0][1] or pad[1][1]:
+        rgb = [np.pad(f, pad, mode="edge") for f in rgb]
+    h, w = rgb[0].shape[:2]
+    base = Fraction(1, INPUT_RATE)
+    graph = av.filter.Graph()
+    chain = [
+        graph.add_buffer(width=w, height=h, format="rgb24", time_base=base),
+        graph.add("format", "yuv444p"),
+        graph.add("minterpolate", f"fps={factor * INPUT_RATE}:{MINTERPOLATE_OPTIONS}"),
+        graph.add("format", "rgb24"),
+        graph.add("buffersink"),
+    ]
+    for a, b in zip(chain, chain[1:], strict=False):
+        a.link_to(b)
+    graph.configure()
+    outputs: dict[int, np.ndarray] = {}
+
+    def drain() -> None:
+        while True:
+            try:
+                frame = graph.pull()
+            except (av.BlockingIOError, av.EOFError):
+                return
+            k = Fraction(frame.pts) * Fraction(frame.time_base) / base * factor
+            if k.denominator == 1 and k % factor:
+                outputs[int(k)] = np.ascontiguousarray(
+                    frame.to_ndarray(format="rgb24")[:h0, :w0])
+
+    for i, f in enumerate([*rgb, rgb[-1]]):  # the last frame again releases the last pair
+        vf = av.VideoFrame.from_ndarray(f, format="rgb24")
+        vf.pts = i
+        vf.time_base = base
+        graph.push(vf)
+        drain()
+    graph.push(None)
+    drain()
+    wanted = [k for k in range((len(rgb) - 1) * factor) if k % factor]
+    missing = [k for k in wanted if k not in outputs]
+    if missing:
+        raise RuntimeError(f"minterpolate gave no frame at {missing[0]}/{factor}")
+    return [outputs[k] for k in wanted]
 
 
 def minterpolate_times(frame0: np.ndarray, frame1: np.ndarray,

@@ -56,6 +56,7 @@ __all__ = [
     "BASELINE_PEER",
     "DEFAULT_PEERS",
     "INTERPOLATION_CSV_FIELDS",
+    "TIMING_CLIP_FRAMES",
     "TIMING_SHAPE",
     "check_methods",
     "check_peers",
@@ -63,6 +64,7 @@ __all__ = [
     "format_timing_table",
     "run_interpolation_bench",
     "run_interpolation_timing",
+    "timing_clip",
     "timing_pair",
 ]
 
@@ -376,6 +378,70 @@ def _cases_with_timing(set_name: str, root: os.PathLike[str] | str) -> list[
     return cases + ([extra] if all(p.is_file() for p in extra.paths) else [])
 
 
+#: Frames of the clip of :func:`timing_clip` (slow motion x2 of it is timed).
+TIMING_CLIP_FRAMES = 6
+
+
+def timing_clip(root: str | os.PathLike[str] | None = None,
+                shape: tuple[int, int] = TIMING_SHAPE,
+                n: int = TIMING_CLIP_FRAMES) -> tuple[str, list[np.ndarray]]:
+    """The clip of the stream timing, resized (bicubic) to ``shape``.
+
+    MPI-Sintel final/alley_1 frames 5, 7, 9, ... (every second frame, the spacing
+    of the Sintel cases) when the clip is on disk, else Middlebury RubberWhale
+    frames 07, 08, ...
+
+    Returns
+    -------
+    label : str
+    frames : list of ndarray
+        ``n`` uint8 RGB (H, W, 3) frames.
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither clip is on disk.
+    """
+    from PIL import Image
+
+    from ...io.images import read_image
+
+    base = data_root(root)
+    h, w = shape
+    sintel = base / "sintel" / "training" / SINTEL_PASS / SINTEL_CLIP
+    paths = [sintel / f"frame_{5 + 2 * k:04d}.png" for k in range(n)]
+    label = f"Sintel {SINTEL_PASS}/{SINTEL_CLIP} frames 5, 7, ..., {5 + 2 * (n - 1)}"
+    if not all(p.is_file() for p in paths):
+        rw = base / "middlebury" / "other-data" / "RubberWhale"
+        paths = [rw / f"frame{7 + k:02d}.png" for k in range(n)]
+        label = f"Middlebury RubberWhale frames 07-{6 + n:02d}"
+        if not all(p.is_file() for p in paths):
+            raise FileNotFoundError(
+                2, "no timing clip (Sintel alley_1 or Middlebury RubberWhale) found; pass "
+                "--data DIR or set VARFLOW_DATA", str(base))
+    frames = [np.array(Image.fromarray(read_image(p)).resize((w, h), Image.Resampling.BICUBIC))
+              for p in paths]
+    return f"{label}, resized to {w}x{h}", frames
+
+
+def _run_stream(name: str, kind: str, frames: list[np.ndarray], params: Any) -> float:
+    """Seconds per in-between frame of x2 slow motion of ``frames``."""
+    from ...retime.schedule import slowmo_schedule
+    from ...retime.stream import retime_frames
+    from ..interpolation_peers import minterpolate_stream
+
+    t0 = time.perf_counter()
+    if kind == "varflow":
+        for _ in retime_frames(frames, slowmo_schedule(len(frames), 2), name, params=params):
+            pass
+    elif name == BASELINE_PEER:
+        minterpolate_stream(frames, 2)
+    else:
+        for a, b in zip(frames, frames[1:], strict=False):
+            INTERPOLATION_PEERS[name](a, b, 0.5)
+    return (time.perf_counter() - t0) / (len(frames) - 1)
+
+
 def run_interpolation_timing(
     methods: str | Sequence[str] | None = None,
     peers: str | Sequence[str] | None = DEFAULT_PEERS,
@@ -385,11 +451,15 @@ def run_interpolation_timing(
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Seconds per frame of every method and peer at 960 × 540.
+    """Seconds per frame of every method and peer at 960 × 540, for a pair and in a stream.
 
-    Each runs once untimed on the pair of :func:`timing_pair` (JIT compilation, caches,
-    library start-up), then ``repeats`` times timed; the median is reported.
-    Methods with context 1 get the context frames, as in the benchmark.
+    *Pair*: one in-between frame of the two frames of :func:`timing_pair` (no
+    context frames), as ``varflow interpolate`` makes it.  *Stream*: x2 slow motion
+    of the clip of :func:`timing_clip`, per in-between frame, as ``varflow retime``
+    makes it (methods with context get the neighbouring frames and share the
+    flows of neighbouring pairs; minterpolate runs once over the clip).  Each runs
+    once untimed (JIT compilation, caches, library start-up), then ``repeats``
+    times timed; the medians are reported.
 
     Parameters
     ----------
@@ -407,56 +477,64 @@ def run_interpolation_timing(
     Returns
     -------
     list of dict
-        One row per method then peer: ``set`` (``"timing"``), ``case`` (the pair's
-        label), ``method``, ``kind``, ``context``, ``seconds`` (median),
-        ``seconds_min``, ``repeats``, ``psnr`` (of the last output against the
-        resized true frame, for reference) and ``ratio_minterpolate`` (seconds over
-        minterpolate's when it ran, else None).
+        One row per method then peer: ``set`` (``"timing"``), ``case`` (the
+        pair's label), ``clip`` (the clip's), ``method``, ``kind``, ``seconds``
+        (pair, median), ``seconds_min``, ``seconds_stream`` (median per frame of
+        the stream), ``repeats``, ``psnr`` (of the pair's frame against the resized
+        true frame, for reference), ``ratio_minterpolate`` and
+        ``ratio_minterpolate_stream`` (over minterpolate's when it ran, else None).
 
     Raises
     ------
     ValueError
         Unknown method or peer, ``repeats`` < 1.
     FileNotFoundError
-        No timing pair on disk.
+        No timing pair or clip on disk.
     """
     from tqdm import tqdm
 
-    from ...retime.methods import get_interpolator
     from ..frame_metrics import psnr
 
     if repeats < 1:
         raise ValueError(f"repeats: must be at least 1, got {repeats}")
     names, peer_names, params = _resolve(methods, peers, overrides)
     label, frames = timing_pair(root, shape)
+    clip_label, clip = timing_clip(root, shape)
     runners = [(m, "varflow") for m in names] + [(p, "peer") for p in peer_names]
     rows: list[dict[str, Any]] = []
-    bar = tqdm(total=len(runners) * (repeats + 1), desc="timing", unit="run",
+    bar = tqdm(total=len(runners) * 2 * (repeats + 1), desc="timing", unit="run",
                file=sys.stderr, disable=None if progress else True, leave=False)
     try:
         for name, kind in runners:
             bar.set_postfix_str(name)
-            use_context = kind == "varflow" and get_interpolator(name).context >= 1
-            _run_one(name, kind, frames, 0.5, params.get(name), use_context)  # untimed
+            _run_one(name, kind, frames, 0.5, params.get(name), False)  # untimed
             bar.update(1)
             times = []
             est = None
             for _ in range(repeats):
-                est, seconds = _run_one(name, kind, frames, 0.5, params.get(name),
-                                        use_context)
+                est, seconds = _run_one(name, kind, frames, 0.5, params.get(name), False)
                 times.append(seconds)
                 bar.update(1)
-            n_ctx = sum(f is not None for f in (frames.previous, frames.following))
-            rows.append({"set": "timing", "split": None, "case": label, "method": name,
-                         "kind": kind, "context": n_ctx if use_context else 0,
+            stream = []
+            for k in range(repeats + 1):  # the first untimed
+                seconds = _run_stream(name, kind, clip, params.get(name))
+                if k:
+                    stream.append(seconds)
+                bar.update(1)
+            rows.append({"set": "timing", "split": None, "case": label, "clip": clip_label,
+                         "method": name, "kind": kind, "context": 0,
                          "seconds": statistics.median(times), "seconds_min": min(times),
-                         "repeats": repeats, "psnr": psnr(est, frames.gt)})
-            log.info("timing %s: %.3f s per frame", name, rows[-1]["seconds"])
+                         "seconds_stream": statistics.median(stream), "repeats": repeats,
+                         "psnr": psnr(est, frames.gt)})
+            log.info("timing %s: %.3f s per frame (pair), %.3f (stream)", name,
+                     rows[-1]["seconds"], rows[-1]["seconds_stream"])
     finally:
         bar.close()
-    base = next((r["seconds"] for r in rows if r["method"] == BASELINE_PEER), None)
+    base = next((r for r in rows if r["method"] == BASELINE_PEER), None)
     for r in rows:
-        r["ratio_minterpolate"] = r["seconds"] / base if base else None
+        r["ratio_minterpolate"] = r["seconds"] / base["seconds"] if base else None
+        r["ratio_minterpolate_stream"] = (r["seconds_stream"] / base["seconds_stream"]
+                                          if base else None)
     return rows
 
 
@@ -529,12 +607,15 @@ def format_timing_table(rows: Sequence[Mapping[str, Any]]) -> str:
     if not rows:
         return "(no timing)"
     r0 = rows[0]
-    title = (f"Timing: {r0['case']}; seconds per frame, median of {r0.get('repeats', '?')} "
-             f"runs after an untimed one")
+    title = (f"Timing: seconds per in-between frame, median of {r0.get('repeats', '?')} "
+             f"runs after an untimed one; pair: {r0['case']} (two frames, no context); "
+             f"stream: x2 slow motion of {r0.get('clip', '?')}")
     body = [[str(r["method"]), str(r["kind"]), _num(_val(r, "seconds"), 3),
-             _num(_val(r, "seconds_min"), 3), _num(_val(r, "ratio_minterpolate"), 2)]
+             _num(_val(r, "ratio_minterpolate"), 2), _num(_val(r, "seconds_stream"), 3),
+             _num(_val(r, "ratio_minterpolate_stream"), 2)]
             for r in rows]
-    header = ["method", "kind", "s/frame", "min s", f"x {BASELINE_PEER}"]
+    header = ["method", "kind", "pair s/frame", f"pair x {BASELINE_PEER}",
+              "stream s/frame", f"stream x {BASELINE_PEER}"]
     return title + "\n\n" + markdown_table(header, body, n_left=2)
 
 
