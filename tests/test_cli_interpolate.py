@@ -67,9 +67,9 @@ def test_interpolate_one_frame(tmp_path: Path, pair: tuple[Path, Path],
     out = tmp_path / "mid.png"
     rc, stdout, err = run(capsys, "interpolate", a, b, "-o", out, "-q")
     assert rc == 0, err
-    assert "naive: 1 frame(s) at t = 0.5 of 64x48" in stdout
+    assert "splat: 1 frame(s) at t = 0.5 of 64x48" in stdout
     mid = read_image(out)
-    want = varflow.interpolate(read_image(a), read_image(b), 0.5, "naive")
+    want = varflow.interpolate(read_image(a), read_image(b), 0.5)  # the default, splat
     assert mid.dtype == np.uint8 and mid.shape == (H, W, 3)
     assert np.array_equal(mid, want)
     rc, _, err = run(capsys, "interpolate", a, b, "-o", out, "--t", "0", "-q")
@@ -86,7 +86,7 @@ def test_interpolate_n_frames_names(tmp_path: Path, pair: tuple[Path, Path],
                           "3", "-q")
     assert rc == 0, err
     assert "t = 0.25, 0.5, 0.75" in stdout
-    want = varflow.interpolate(read_image(a), read_image(b), [0.25, 0.5, 0.75], "naive")
+    want = varflow.interpolate(read_image(a), read_image(b), [0.25, 0.5, 0.75])
     for k in range(3):
         assert np.array_equal(read_image(tmp_path / f"m_{k + 1:03d}.png"), want[k])
     rc, _, err = run(capsys, "interpolate", a, b, "-o", tmp_path / "mid.png", "-n", "2", "-q")
@@ -95,7 +95,7 @@ def test_interpolate_n_frames_names(tmp_path: Path, pair: tuple[Path, Path],
     rc, _, err = run(capsys, "interpolate", a, b, "-o", f"{tmp_path / 'dd'}/", "-n", "2", "-q")
     assert rc == 0, err
     assert sorted(p.name for p in (tmp_path / "dd").iterdir()) == ["01.png", "02.png"]
-    third = varflow.interpolate(read_image(a), read_image(b), [1 / 3, 2 / 3], "naive")
+    third = varflow.interpolate(read_image(a), read_image(b), [1 / 3, 2 / 3])
     assert np.array_equal(read_image(tmp_path / "dd" / "02.png"), third[1])
 
 
@@ -172,6 +172,6 @@ def test_help_lists_the_interpolation_parameters(capsys: pytest.CaptureFixture[s
     assert rc == 0
     text = " ".join(out.split())
     assert "--flow-method STR" in text and "--data-weight FLOAT" in text
-    assert "(default tvl1; splat: tvl1-ld)" in text
+    assert "(default tvl1; splat: tvl1-ld; splat-fast: tvl1-fast)" in text
     rc, out, _ = run(capsys, "--help")
     assert rc == 0 and "interpolate" in out and "retime" in out

@@ -12,9 +12,15 @@ import varflow
 from varflow.evaluation.frame_metrics import psnr
 from varflow.ops.splat import fill_holes, fill_holes_numpy, splat, splat_numpy
 from varflow.ops.warp import warp_bilinear, warp_bilinear_numpy
-from varflow.retime.motion import FlowCache
+from varflow.retime.motion import FlowCache, pair_flows, reduced, working_scale
 from varflow.retime.schedule import slowmo_schedule
-from varflow.retime.splatting import SplatMotion, SplatParams, accelerations, prepare_splat
+from varflow.retime.splatting import (
+    SplatFastParams,
+    SplatMotion,
+    SplatParams,
+    accelerations,
+    prepare_splat,
+)
 from varflow.retime.stream import retime_frames
 
 
@@ -136,7 +142,8 @@ def test_fill_holes_engines_agree_and_keep_known_values() -> None:
 @pytest.mark.parametrize(("field", "value"), [
     ("splat_sharpness", -1.0), ("occlusion_cost", np.nan), ("fb_tolerance", "3"),
     ("fb_relative", True), ("sampling", "nearest"), ("visibility_blend", 1),
-    ("quadratic", "yes"), ("flow_method", "nope")])
+    ("quadratic", "yes"), ("flow_method", "nope"), ("flow_max_pixels", -1),
+    ("flow_max_pixels", 2.5), ("fallback_blur", -0.5)])
 def test_splat_params_name_the_field(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=field):
         SplatParams(**{field: value})
@@ -286,6 +293,31 @@ def test_bad_inputs_name_what_is_wrong() -> None:
         varflow.interpolate(f0, f0, 0.5, "magic")
     with pytest.raises(ValueError, match="no_such_field"):
         varflow.interpolate(f0, f0, 0.5, "splat", no_such_field=1)
+
+
+def test_the_presets() -> None:
+    p, fast = SplatParams(), SplatFastParams()
+    assert (p.flow_method, p.flow_params.match_scale, p.flow_max_pixels) == ("tvl1-ld", 0.5,
+                                                                             300_000)
+    assert (fast.flow_method, fast.flow_max_pixels) == ("tvl1-fast", 150_000)
+    assert p.replace(flow_method="tvl1").flow_params == varflow.make_params("tvl1")
+    assert varflow.retime.DEFAULT_INTERPOLATOR == "splat"
+
+
+def test_flows_on_reduced_frames_are_resized_back() -> None:
+    """A 1.6 x 0.8 px translation of a 96 x 128 frame, its flows estimated on frames
+    of a quarter of the pixels (half the size): the vectors come back at full scale."""
+    assert working_scale((96, 128, 3), 0) == 1.0
+    assert working_scale((96, 128, 3), 96 * 128) == 1.0
+    assert working_scale((96, 128, 3), 96 * 128 // 4) == pytest.approx(0.5)
+    f0 = texture(96, 128)
+    f1 = texture(96, 128, (1.6, 0.8))
+    assert reduced(f0, 0.5).shape == (48, 64, 3)
+    f01, f10 = pair_flows([(f0, f1), (f1, f0)], SplatParams(), max_pixels=96 * 128 // 4)
+    inner = (slice(10, -10), slice(10, -10))
+    assert f01.shape == (96, 128, 2)
+    assert np.abs(f01[inner] - [1.6, 0.8]).mean() < 0.1
+    assert np.abs(f10[inner] + [1.6, 0.8]).mean() < 0.1
 
 
 # --------------------------------------------------------------------------- flows shared

@@ -11,6 +11,7 @@ once.
 from __future__ import annotations
 
 import hashlib
+import math
 from collections import OrderedDict
 from collections.abc import Sequence
 
@@ -19,7 +20,8 @@ import numpy as np
 from ..multiframe.track import FlowTrackParams
 from ..twoframe.coarse_to_fine import ProgressCallback
 
-__all__ = ["FlowCache", "PairMotion", "bidirectional_flows", "pair_flows"]
+__all__ = ["FlowCache", "PairMotion", "bidirectional_flows", "pair_flows", "reduced",
+           "working_scale"]
 
 
 class PairMotion:
@@ -83,9 +85,11 @@ class FlowCache:
         return len(self._flows)
 
     @staticmethod
-    def key(frame_a: np.ndarray, frame_b: np.ndarray, params: FlowTrackParams) -> tuple:
+    def key(frame_a: np.ndarray, frame_b: np.ndarray, params: FlowTrackParams,
+            max_pixels: int = 0) -> tuple:
         """The cache key of the flow from ``frame_a`` to ``frame_b``."""
-        return (_digest(frame_a), _digest(frame_b), params.flow_method, repr(params.flow_params))
+        return (_digest(frame_a), _digest(frame_b), params.flow_method, repr(params.flow_params),
+                max_pixels)
 
     def get(self, key: tuple) -> np.ndarray | None:
         flow = self._flows.get(key)
@@ -102,9 +106,28 @@ class FlowCache:
             self._flows.popitem(last=False)
 
 
+def working_scale(shape: tuple[int, ...], max_pixels: int) -> float:
+    """The factor that brings ``shape``'s first two sides to at most ``max_pixels``
+    pixels (1 when they are within it or ``max_pixels`` is 0)."""
+    n = int(shape[0]) * int(shape[1])
+    if max_pixels <= 0 or n <= max_pixels:
+        return 1.0
+    return math.sqrt(max_pixels / n)
+
+
+def reduced(frame: np.ndarray, scale: float) -> np.ndarray:
+    """``frame`` (H, W, C) float32 resized by ``scale`` < 1: Gaussian pre-smoothing
+    σ = 0.6/scale − 0.6 against aliasing, then bilinear resampling."""
+    from ..ops.pyramid import resize_bilinear, smooth_image_fast
+
+    h, w = frame.shape[:2]
+    shape = (max(8, round(h * scale)), max(8, round(w * scale)))
+    return resize_bilinear(smooth_image_fast(frame, 0.6 / scale - 0.6), shape)
+
+
 def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrackParams,
                callback: ProgressCallback | None = None, stats: dict | None = None,
-               cache: FlowCache | None = None) -> list[np.ndarray]:
+               cache: FlowCache | None = None, max_pixels: int = 0) -> list[np.ndarray]:
     """The flows of ``params.flow_method`` from ``a`` to ``b`` for every pair ``(a, b)``.
 
     Parameters
@@ -120,16 +143,22 @@ def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrack
         ``flows`` (estimated) and ``cached_flows`` (served from ``cache``) are
         incremented.
     cache : FlowCache, optional
+    max_pixels : int
+        Frames of more pixels are resized to this many (:func:`reduced`) for the
+        flow, which is resized back (:func:`varflow.ops.pyramid.resize_flow`:
+        vectors scaled); 0 (default) never.
 
     Returns
     -------
     list of ndarray, each (H, W, 2) float32
         The cache's own arrays for cached flows: do not modify them.
     """
+    from ..ops.pyramid import resize_flow
     from ..twoframe.methods import METHODS, run_method
 
     m = METHODS[params.flow_method]
-    keys = [None if cache is None else FlowCache.key(a, b, params) for a, b in pairs]
+    keys = [None if cache is None else FlowCache.key(a, b, params, max_pixels)
+            for a, b in pairs]
     out: list[np.ndarray | None] = [None if k is None else cache.get(k) for k in keys]
     todo = [i for i, f in enumerate(out) if f is None]
     for n, i in enumerate(todo):
@@ -139,7 +168,12 @@ def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrack
             if callback is not None:
                 callback(n * total + k, len(todo) * total)
 
-        flow = run_method(m, a, b, params.flow_params, callback=tick)
+        scale = working_scale(a.shape, max_pixels)
+        if scale < 1:
+            flow = resize_flow(run_method(m, reduced(a, scale), reduced(b, scale),
+                                          params.flow_params, callback=tick), a.shape[:2])
+        else:
+            flow = run_method(m, a, b, params.flow_params, callback=tick)
         if cache is not None:
             cache.put(keys[i], flow)
         out[i] = flow
