@@ -310,12 +310,15 @@ def test_cli_peers_on_fake_data_with_csv(capsys, fake_root: Path, tmp_path: Path
 
 @pytest.mark.data
 def test_real_middlebury_bench(data_root: Path) -> None:
-    rows = bi.run_interpolation_bench(["middlebury"], "reporting", ["naive"], "all",
+    rows = bi.run_interpolation_bench(["middlebury"], "reporting", ["naive", "splat"], "all",
                                       root=data_root, max_cases=1, progress=False)
     by = {r["method"]: r for r in rows}
-    assert list(by) == ["naive", "minterpolate", "blend", "repeat"]
+    assert list(by) == ["naive", "splat", "minterpolate", "blend", "repeat"]
     assert {r["case"] for r in rows} == {"Dimetrodon"}
-    # measured on Dimetrodon: naive 40.1 dB, minterpolate 38.1, blend 32.5, repeat 28.9
+    # measured on Dimetrodon: splat 42.1 dB, naive 40.1, minterpolate 38.1, blend 32.5,
+    # repeat 28.9
+    assert by["splat"]["psnr"] > by["minterpolate"]["psnr"] + 2.5
+    assert by["splat"]["psnr"] > by["naive"]["psnr"] + 1.0
     assert by["naive"]["psnr"] > by["blend"]["psnr"] + 4
     assert by["minterpolate"]["psnr"] > by["blend"]["psnr"] + 4
     assert by["blend"]["psnr"] > by["repeat"]["psnr"] + 2
@@ -329,12 +332,17 @@ def test_real_middlebury_bench(data_root: Path) -> None:
 def test_real_cli_run(capsys, data_root: Path, tmp_path: Path) -> None:
     out_csv = tmp_path / "real.csv"
     rc, out, err = _run(capsys, "bench", "interpolation", "--quiet", "--no-timing",
-                        "--sets", "sintel", "--max-cases", "1", "--methods", "naive",
+                        "--sets", "sintel", "--max-cases", "1", "--methods", "naive,splat",
                         "--peers", "minterpolate,blend", "--data", data_root, "--csv", out_csv)
     assert rc == 0, err
     assert "frame_0005" in out and "Timing:" not in out
     with open(out_csv, newline="") as f:
         rows = {r["method"]: r for r in csv.DictReader(f)}
-    assert list(rows) == ["naive", "minterpolate", "blend"]
-    assert float(rows["naive"]["psnr"]) > float(rows["blend"]["psnr"])
-    assert rows["naive"]["context"] == "0"
+    assert list(rows) == ["naive", "splat", "minterpolate", "blend"]
+    psnr = {m: float(r["psnr"]) for m, r in rows.items()}
+    assert psnr["naive"] > psnr["blend"]
+    # measured on frame_0005 (frames 4, 6 with the context 2 and 8): splat 38.4 dB,
+    # naive 36.6, minterpolate 35.8
+    assert psnr["splat"] > psnr["minterpolate"] + 1.5
+    assert psnr["splat"] > psnr["naive"] + 1.0
+    assert rows["naive"]["context"] == "0" and rows["splat"]["context"] == "2"

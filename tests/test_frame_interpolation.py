@@ -10,7 +10,20 @@ import pytest
 
 import varflow
 from varflow.evaluation.frame_metrics import psnr
-from varflow.ops.splat import fill_holes, fill_holes_numpy, splat, splat_numpy
+from varflow.ops.occlusion import (
+    hidden_mask,
+    hidden_mask_numpy,
+    photometric_error,
+    photometric_error_numpy,
+)
+from varflow.ops.splat import (
+    fill_holes,
+    fill_holes_numpy,
+    splat,
+    splat_numpy,
+    splat_trajectories,
+    splat_trajectories_numpy,
+)
 from varflow.ops.warp import warp_bilinear, warp_bilinear_numpy
 from varflow.retime.motion import FlowCache, pair_flows, reduced, working_scale
 from varflow.retime.schedule import slowmo_schedule
@@ -80,6 +93,42 @@ def test_warp_bilinear_engines_agree() -> None:
     assert not ia[3, 4]
 
 
+def test_hidden_mask_engines_agree_and_find_the_occlusion() -> None:
+    rng = np.random.default_rng(4)
+    fwd = rng.normal(scale=3, size=(30, 40, 2)).astype(np.float32)
+    bwd = rng.normal(scale=3, size=(30, 40, 2)).astype(np.float32)
+    fwd[2, 3] = np.nan
+    for tol, rel in ((1.0, 0.05), (3.0, 0.0), (0.0, 0.5)):
+        np.testing.assert_array_equal(hidden_mask(fwd, bwd, tol, rel),
+                                      hidden_mask_numpy(fwd, bwd, tol, rel))
+    # a block moving 6 px right over a still background: the background it covers is
+    # hidden in the second frame, nothing else (bar the block's flow at the border)
+    f = np.zeros((20, 30, 2), np.float32)
+    f[5:15, 5:15, 0] = 6.0
+    b = np.zeros_like(f)
+    b[5:15, 11:21, 0] = -6.0
+    hid = hidden_mask(f, b, 1.0, 0.0)
+    expected = np.zeros((20, 30), bool)
+    expected[5:15, 15:21] = True
+    np.testing.assert_array_equal(hid, expected)
+    with pytest.raises(ValueError, match="hidden_mask"):
+        hidden_mask(f, b[:5], 1.0, 0.0)
+
+
+def test_photometric_error_engines_agree() -> None:
+    rng = np.random.default_rng(6)
+    a, b = rng.random((2, 25, 33, 3)).astype(np.float32)
+    flow = rng.normal(scale=5, size=(25, 33, 2)).astype(np.float32)
+    flow[4, 4] = np.nan
+    np.testing.assert_allclose(photometric_error(a, b, flow),
+                               photometric_error_numpy(a, b, flow), atol=2e-6)
+    zero = np.zeros((25, 33, 2), np.float32)
+    np.testing.assert_allclose(photometric_error(a, b, zero), np.abs(a - b).mean(axis=2),
+                               atol=1e-6)
+    with pytest.raises(ValueError, match="photometric_error"):
+        photometric_error(a, b[:5], flow)
+
+
 def test_splat_engines_agree_and_conserve_the_weights() -> None:
     rng = np.random.default_rng(1)
     h, w = 40, 52
@@ -104,6 +153,27 @@ def test_splat_engines_agree_and_conserve_the_weights() -> None:
     assert tot.sum() == pytest.approx(z[inside].sum(), rel=1e-12)
     np.testing.assert_allclose(acc[:-2, 3:] / tot[:-2, 3:, None], vals[2:, :-3], atol=1e-6)
     assert np.all(tot[-2:] == 0) and np.all(tot[:, :3] == 0)
+
+
+def test_trajectory_splat_engines_agree() -> None:
+    rng = np.random.default_rng(5)
+    h, w = 33, 47
+    flow = rng.normal(scale=4, size=(h, w, 2)).astype(np.float32)
+    accel = rng.normal(scale=1, size=(h, w, 2)).astype(np.float32)
+    flow[1, 1] = np.nan
+    weights = np.exp(-rng.uniform(0, 100, size=(h, w)))
+    for time, own_first in ((0.3, True), (0.8, False), (0.0, True), (1.0, False)):
+        a, ta = splat_trajectories(flow, accel, weights, time, own_first)
+        b, tb = splat_trajectories_numpy(flow, accel, weights, time, own_first)
+        np.testing.assert_allclose(ta, tb, rtol=1e-5, atol=1e-300)
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6 * np.abs(b).max())
+    # no acceleration: a pixel carries -s f to its own frame and (1 - s) f to the other
+    acc, tot = splat_trajectories(np.full((5, 6, 2), 2.0, np.float32),
+                                  np.zeros((5, 6, 2), np.float32), np.ones((5, 6)), 0.5, True)
+    np.testing.assert_allclose(acc[2:, 2:] / tot[2:, 2:, None],
+                               np.broadcast_to([-1.0, -1.0, 1.0, 1.0], (3, 4, 4)))
+    with pytest.raises(ValueError, match="time"):
+        splat_trajectories(flow, accel, weights, 1.5, True)
 
 
 def test_splat_accumulates_two_sources() -> None:
@@ -299,6 +369,7 @@ def test_the_presets() -> None:
     p, fast = SplatParams(), SplatFastParams()
     assert (p.flow_method, p.flow_params.match_scale, p.flow_max_pixels) == ("tvl1-ld", 0.5,
                                                                              300_000)
+    assert (p.flow_params.weighted_median_levels, p.flow_params.max_iterations) == (3, 24)
     assert (fast.flow_method, fast.flow_max_pixels) == ("tvl1-fast", 150_000)
     assert p.replace(flow_method="tvl1").flow_params == varflow.make_params("tvl1")
     assert varflow.retime.DEFAULT_INTERPOLATOR == "splat"

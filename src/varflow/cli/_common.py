@@ -298,7 +298,7 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     Parameters
     ----------
     method : str
-        A registered method name.
+        A registered two-frame, trajectory or interpolation method name.
     markdown : bool
         Markdown table (as in the README) instead of aligned text.
 
@@ -306,7 +306,14 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     -------
     str
     """
-    m = TRACKERS[method] if method in TRACKERS else get_method(method)
+    from ..retime.methods import INTERPOLATORS
+
+    if method in TRACKERS:
+        m = TRACKERS[method]
+    elif method in INTERPOLATORS:
+        m = INTERPOLATORS[method]
+    else:
+        m = get_method(method)
     docs: dict[type, dict[str, _FieldDoc]] = {}
     rows = []
     for name, default, owner in parameter_fields(m):

@@ -245,9 +245,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_methods(args: argparse.Namespace) -> int:
-    width = max(len(n) for n in (*METHODS, *TRACKERS))
+    from ..retime.methods import INTERPOLATORS
+
+    width = max(len(n) for n in (*METHODS, *TRACKERS, *INTERPOLATORS))
     for title, registry in (("two-frame flow (varflow flow --method)", METHODS),
-                            ("trajectories (varflow track --method)", TRACKERS)):
+                            ("trajectories (varflow track --method)", TRACKERS),
+                            ("frame interpolation (varflow interpolate / retime --method)",
+                             INTERPOLATORS)):
         print(f"# {title}")
         for name, m in registry.items():
             print(f"{name:<{width}}  {m.description}")
