@@ -228,7 +228,9 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
     rc, out, _ = run(capsys, "methods")
     assert rc == 0
     lines = [ln for ln in out.splitlines() if not ln.startswith("# ")]
-    entries = [*registry.METHODS.items(), *registry.TRACKERS.items()]
+    from varflow.retime.methods import INTERPOLATORS
+
+    entries = [*registry.METHODS.items(), *registry.TRACKERS.items(), *INTERPOLATORS.items()]
     assert len(lines) == len(entries)
     for line, (name, m) in zip(lines, entries, strict=True):
         assert line.split()[0] == name and m.description in line
@@ -236,6 +238,7 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
     assert rc == 0
     default = registry.METHODS["tvl1"].params().data_weight
     assert re.search(rf"`data_weight` \(`--data-weight`\) \| λ \| `{default!r}` \|", out)
+    assert re.search(r"`splat_sharpness` \(`--splat-sharpness`\) \| α \| `50.0` \|", out)
 
 
 def test_help_lists_generated_parameter_flags(capsys: pytest.CaptureFixture[str]) -> None:
