@@ -343,6 +343,21 @@ def test_dtype_shape_and_the_end_times(method: str) -> None:
         np.testing.assert_array_equal(one, out[1])
 
 
+def test_float_frames_of_another_range() -> None:
+    """Frames in 0..255 as floats give the frame of the same frames in [0, 1], scaled:
+    the photometric costs are read in the frames' own range (the flows see the frames
+    scaled jointly by their range, as varflow.flow does, hence not bit for bit)."""
+    f0 = texture(40, 48)
+    f1 = texture(40, 48, (2.5, -1.0))
+    truth = texture(40, 48, (1.25, -0.5))
+    unit = varflow.interpolate(f0, f1, 0.5)
+    wide = varflow.interpolate(f0 * 255, f1 * 255, 0.5)
+    assert wide.dtype == np.float32 and wide.max() > 1.5
+    # measured: 65 dB apart; each 45 dB from the truth (the borders enter)
+    assert psnr(wide / 255, unit) > 45.0
+    assert abs(psnr(wide / 255, truth) - psnr(unit, truth)) < 0.5
+
+
 def test_bad_inputs_name_what_is_wrong() -> None:
     f0 = texture(16, 20)
     with pytest.raises(ValueError, match="t:"):
