@@ -31,9 +31,9 @@ bidirectional, with softmax splatting (Niklaus & Liu 2020) as its z-buffer:
    ``I_t(p) = (w0 I0(x0) + w1 I1(x1)) / (w0 + w1)``
    with ``w0 = (1 − t)(1 − O1(x1))`` and ``w1 = t (1 − O0(x0))`` (a sample from a
    frame in which the point is hidden, or outside the frame, is left out; where
-   both are, the plain ``(1 − t, t)`` blend).  The frames are sampled bicubically (bilinear sampling blurs: 1.0,
-   0.1 and 0.1 dB less on Middlebury, UCF101 and Sintel) and the result is
-   clipped to the range of the two frames.
+   both are, the plain ``(1 − t, t)`` blend).  The frames are sampled bicubically
+   (bilinear sampling blurs: 1.0, 0.1 and 0.1 dB less on Middlebury, UCF101 and
+   Sintel) and the result is clipped to the range of the two frames.
 5. **Where the motion is not known**: where both samples come from points hidden
    in the other frame (``O0(x0) O1(x1)``, smoothed), the flows failed (fast
    non-rigid motion, motion blur) and the two samples show different things; the
