@@ -374,6 +374,8 @@ def test_bad_inputs_name_what_is_wrong() -> None:
         varflow.interpolate(bad, f0)
     with pytest.raises(ValueError, match="following"):
         varflow.interpolate(f0, f0, 0.5, "splat", following=f0[:8])
+    with pytest.raises(ValueError, match="frame0: image too small"):
+        varflow.interpolate(f0[:2, :2], f0[:2, :2])
     with pytest.raises(ValueError, match="method"):
         varflow.interpolate(f0, f0, 0.5, "magic")
     with pytest.raises(ValueError, match="no_such_field"):

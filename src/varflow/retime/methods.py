@@ -217,8 +217,8 @@ def _working(frame: Any, name: str) -> np.ndarray:
     if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (1, 3, 4)):
         raise ValueError(f"{name}: expected shape (H, W) or (H, W, C) with C in 1, 3, 4, "
                          f"got {a.shape}")
-    if min(a.shape[:2]) < 2:
-        raise ValueError(f"{name}: image too small, shape {a.shape}")
+    if min(a.shape[:2]) < 3:  # what the flow methods take
+        raise ValueError(f"{name}: image too small, shape {a.shape} (at least 3 x 3)")
     if not (a.dtype in (np.uint8, np.uint16) or np.issubdtype(a.dtype, np.floating)):
         raise ValueError(f"{name}: unsupported dtype {a.dtype} (uint8, uint16 or float)")
     f = a.astype(np.float32)
