@@ -13,7 +13,7 @@ import logging
 import math
 import re
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -410,6 +410,34 @@ def _magnitude(flow: np.ndarray) -> np.ndarray:
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(np.asarray(image, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def rate_arg(text: str) -> Any:
+    """argparse ``type`` of a frame rate: a positive number or ratio, as a Fraction."""
+    from ..retime.schedule import parse_rate
+
+    try:
+        return parse_rate(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive rate such as 60, 29.97 or 24000/1001, got {text!r}"
+        ) from None
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """argparse ``type`` of an integer of at least ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected an integer >= {minimum}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {minimum}, got {value}")
+        return value
+
+    return parse
 
 
 def _split_list(text: str) -> list[str]:

@@ -45,6 +45,8 @@ from ._common import (
     _Parser,
     _Progress,
     chosen_methods,
+    int_at_least,
+    rate_arg,
 )
 
 __all__ = ["add_parser", "require_batch_extra"]
@@ -81,26 +83,9 @@ def _non_negative(text: str) -> int:
     return value
 
 
-def _rate(text: str) -> Any:
-    from ..retime.schedule import parse_rate
-
-    try:
-        return parse_rate(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a positive rate such as 60 or 24000/1001, got {text!r}") from None
-
-
 def _rate_text(rate: Any) -> str | None:
     """An exact rate as ``"num/den"`` (recorded in the manifest), None for None."""
     return None if rate is None else f"{rate.numerator}/{rate.denominator}"
-
-
-def _slowmo(text: str) -> int:
-    value = int(text)
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 2, got {value}")
-    return value
 
 
 def require_batch_extra() -> None:
@@ -193,13 +178,13 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                         "input, written to OUT/<name>.<format> (as 'varflow retime', audio "
                         "copied when the duration is kept).")
     x = r.add_mutually_exclusive_group(required=True)
-    x.add_argument("--fps", type=_rate, metavar="F",
+    x.add_argument("--fps", type=rate_arg, metavar="F",
                    help="output frame rate, e.g. 60 or 24000/1001")
-    x.add_argument("--slowmo", type=_slowmo, metavar="K",
+    x.add_argument("--slowmo", type=int_at_least(2), metavar="K",
                    help="slow motion: K-1 new frames between every two (K >= 2)")
     r.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
                    help=f"one of: {', '.join(INTERPOLATORS)} (default {DEFAULT_INTERPOLATOR})")
-    r.add_argument("--input-fps", type=_rate, metavar="R",
+    r.add_argument("--input-fps", type=rate_arg, metavar="R",
                    help="source frame rate (default: the video's own; 25 for a folder)")
     r.add_argument("--format", default="mkv", metavar="EXT",
                    help="output container: mkv (lossless FFV1, default), mp4, mov, avi, "

@@ -51,7 +51,6 @@ from ..retime.methods import (
     interpolate,
     make_interp_params,
 )
-from ..retime.schedule import parse_rate
 from ._common import (
     _add_param_flags,
     _check_output,
@@ -60,30 +59,13 @@ from ._common import (
     _own_params,
     _Progress,
     chosen_methods,
+    int_at_least,
+    rate_arg,
 )
 
 __all__ = ["add_parser"]
 
 log = logging.getLogger("varflow.cli")
-
-
-def _rate(text: str) -> Any:
-    try:
-        return parse_rate(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a positive rate such as 60, 29.97 or 24000/1001, got {text!r}"
-        ) from None
-
-
-def _slowmo(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 2, got {text!r}") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 2, got {value}")
-    return value
 
 
 def _time(text: str) -> float:
@@ -93,16 +75,6 @@ def _time(text: str) -> float:
         value = math.nan
     if not (math.isfinite(value) and 0.0 <= value <= 1.0):
         raise argparse.ArgumentTypeError(f"must be a number in [0, 1], got {text!r}")
-    return value
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
     return value
 
 
@@ -130,7 +102,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     x = p.add_mutually_exclusive_group()
     x.add_argument("--t", type=_time, default=None, metavar="T",
                    help="time of the frame, in [0, 1] (default 0.5)")
-    x.add_argument("-n", type=_count, default=None, metavar="K",
+    x.add_argument("-n", type=int_at_least(1), default=None, metavar="K",
                    help="write K frames at t = k / (K + 1), k = 1..K")
     p.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
                    help=f"one of: {names} (default {DEFAULT_INTERPOLATOR})")
@@ -150,13 +122,13 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     r.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="video (.mkv: lossless FFV1; .mp4: H.264; ...) or folder of PNG frames")
     x = r.add_mutually_exclusive_group(required=True)
-    x.add_argument("--fps", type=_rate, metavar="F",
+    x.add_argument("--fps", type=rate_arg, metavar="F",
                    help="output frame rate, e.g. 60, 50 or 24000/1001")
-    x.add_argument("--slowmo", type=_slowmo, metavar="K",
+    x.add_argument("--slowmo", type=int_at_least(2), metavar="K",
                    help="slow motion: K-1 new frames between every two (K >= 2)")
     r.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
                    help=f"one of: {names} (default {DEFAULT_INTERPOLATOR})")
-    r.add_argument("--input-fps", type=_rate, metavar="R",
+    r.add_argument("--input-fps", type=rate_arg, metavar="R",
                    help="source frame rate (default: the video's own; 25 for a folder)")
     r.add_argument("--codec", metavar="C",
                    help="FFmpeg encoder of a video output (default after the extension)")
