@@ -113,15 +113,19 @@ def _rgb_pair(frame0: np.ndarray, frame1: np.ndarray) -> tuple[np.ndarray, np.nd
     return out[0], out[1]
 
 
-def _run_minterpolate(f0: np.ndarray, f1: np.ndarray, n: int) -> dict[int, np.ndarray]:
-    """minterpolate's outputs at ``fps = n·INPUT_RATE``: ``{k: frame at t = k/n}``."""
+def _run_minterpolate(frames: Sequence[np.ndarray], n: int) -> dict[int, np.ndarray]:
+    """minterpolate over uint8 RGB ``frames`` fed at :data:`INPUT_RATE` and output at
+    ``fps = n·INPUT_RATE``: ``{k: frame}`` for the output at ``t = k/n`` frame
+    intervals after the first frame (the last frame is pushed twice to release the
+    last interval; sides below :data:`MIN_SIDE` are padded by edge replication and
+    cropped back)."""
     import av
 
-    h0, w0 = f0.shape[:2]
+    h0, w0 = frames[0].shape[:2]
     pad = ((0, max(0, MIN_SIDE - h0)), (0, max(0, MIN_SIDE - w0)), (0, 0))
     if pad[0][1] or pad[1][1]:
-        f0, f1 = np.pad(f0, pad, mode="edge"), np.pad(f1, pad, mode="edge")
-    h, w = f0.shape[:2]
+        frames = [np.pad(f, pad, mode="edge") for f in frames]
+    h, w = frames[0].shape[:2]
     base = Fraction(1, INPUT_RATE)
     graph = av.filter.Graph()
     chain = [
@@ -143,12 +147,12 @@ def _run_minterpolate(f0: np.ndarray, f1: np.ndarray, n: int) -> dict[int, np.nd
             except (av.BlockingIOError, av.EOFError):
                 return
             k = Fraction(frame.pts) * Fraction(frame.time_base) / base * n
-            if k.denominator == 1 and 0 <= k <= n:
+            if k.denominator == 1 and 0 <= k <= (len(frames) - 1) * n:
                 outputs[int(k)] = np.ascontiguousarray(
                     frame.to_ndarray(format="rgb24")[:h0, :w0])
 
-    # the third frame (frame1 again) releases the frames of [frame0, frame1]
-    for i, f in enumerate((f0, f1, f1)):
+    # the last frame again releases the frames of the last interval
+    for i, f in enumerate([*frames, frames[-1]]):
         vf = av.VideoFrame.from_ndarray(f, format="rgb24")
         vf.pts = i
         vf.time_base = base
@@ -186,51 +190,12 @@ def minterpolate_stream(frames: Sequence[np.ndarray], factor: int) -> list[np.nd
     RuntimeError
         An in-between frame is missing from the filter's output.
     """
-    import av
-
     if isinstance(factor, bool) or not isinstance(factor, int) or factor < 2:
         raise ValueError(f"factor: expected an integer >= 2, got {factor!r}")
     if len(frames) < 2:
         raise ValueError(f"frames: need at least 2, got {len(frames)}")
     rgb = [_rgb_pair(frames[0], f)[1] for f in frames]
-    h0, w0 = rgb[0].shape[:2]
-    pad = ((0, max(0, MIN_SIDE - h0)), (0, max(0, MIN_SIDE - w0)), (0, 0))
-    if pad[0][1] or pad[1][1]:
-        rgb = [np.pad(f, pad, mode="edge") for f in rgb]
-    h, w = rgb[0].shape[:2]
-    base = Fraction(1, INPUT_RATE)
-    graph = av.filter.Graph()
-    chain = [
-        graph.add_buffer(width=w, height=h, format="rgb24", time_base=base),
-        graph.add("format", "yuv444p"),
-        graph.add("minterpolate", f"fps={factor * INPUT_RATE}:{MINTERPOLATE_OPTIONS}"),
-        graph.add("format", "rgb24"),
-        graph.add("buffersink"),
-    ]
-    for a, b in zip(chain, chain[1:], strict=False):
-        a.link_to(b)
-    graph.configure()
-    outputs: dict[int, np.ndarray] = {}
-
-    def drain() -> None:
-        while True:
-            try:
-                frame = graph.pull()
-            except (av.BlockingIOError, av.EOFError):
-                return
-            k = Fraction(frame.pts) * Fraction(frame.time_base) / base * factor
-            if k.denominator == 1 and k % factor:
-                outputs[int(k)] = np.ascontiguousarray(
-                    frame.to_ndarray(format="rgb24")[:h0, :w0])
-
-    for i, f in enumerate([*rgb, rgb[-1]]):  # the last frame again releases the last pair
-        vf = av.VideoFrame.from_ndarray(f, format="rgb24")
-        vf.pts = i
-        vf.time_base = base
-        graph.push(vf)
-        drain()
-    graph.push(None)
-    drain()
+    outputs = _run_minterpolate(rgb, factor)
     wanted = [k for k in range((len(rgb) - 1) * factor) if k % factor]
     missing = [k for k in wanted if k not in outputs]
     if missing:
@@ -271,7 +236,7 @@ def minterpolate_times(frame0: np.ndarray, frame1: np.ndarray,
     n = 1
     if inner:
         n = math.lcm(*(fr.denominator for fr in inner))
-        outputs = _run_minterpolate(f0, f1, n)
+        outputs = _run_minterpolate([f0, f1], n)
     out = []
     for fr in fracs:
         if fr == 0:
