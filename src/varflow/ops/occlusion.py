@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .warp import warp_bilinear_numpy
+from .warp import bilinear_at, bilinear_cell, warp_bilinear_numpy
 
 __all__ = ["hidden_mask", "hidden_mask_numpy", "photometric_error", "photometric_error_numpy"]
 
@@ -56,7 +56,6 @@ def _hidden_kernel(forward, backward, tolerance, relative, out):
     h, w = out.shape
     xmax = np.float32(w - 1.0)
     ymax = np.float32(h - 1.0)
-    one = np.float32(1.0)
     for i in nb.prange(h):
         for j in range(w):
             u = forward[i, j, 0]
@@ -66,16 +65,9 @@ def _hidden_kernel(forward, backward, tolerance, relative, out):
             if not (x >= 0 and x <= xmax and y >= 0 and y <= ymax):  # also NaN
                 out[i, j] = True
                 continue
-            x0 = min(int(np.floor(x)), w - 2) if w > 1 else 0
-            y0 = min(int(np.floor(y)), h - 2) if h > 1 else 0
-            x1 = min(x0 + 1, w - 1)
-            y1 = min(y0 + 1, h - 1)
-            fx = x - np.float32(x0)
-            fy = y - np.float32(y0)
-            bu = ((backward[y0, x0, 0] * (one - fx) + backward[y0, x1, 0] * fx) * (one - fy)
-                  + (backward[y1, x0, 0] * (one - fx) + backward[y1, x1, 0] * fx) * fy)
-            bv = ((backward[y0, x0, 1] * (one - fx) + backward[y0, x1, 1] * fx) * (one - fy)
-                  + (backward[y1, x0, 1] * (one - fx) + backward[y1, x1, 1] * fx) * fy)
+            x0, x1, y0, y1, fx, fy = bilinear_cell(x, y, h, w)
+            bu = bilinear_at(backward, 0, x0, x1, y0, y1, fx, fy)
+            bv = bilinear_at(backward, 1, x0, x1, y0, y1, fx, fy)
             err = np.hypot(u + bu, v + bv)
             out[i, j] = not (err <= tolerance + relative * np.hypot(u, v))
 
@@ -127,29 +119,13 @@ def photometric_error_numpy(frame0: np.ndarray, frame1: np.ndarray,
 @nb.njit(cache=True, parallel=True)
 def _photo_kernel(frame0, frame1, flow, out):
     h, w, k = frame0.shape
-    xmax = np.float32(w - 1.0)
-    ymax = np.float32(h - 1.0)
-    one = np.float32(1.0)
     for i in nb.prange(h):
         for j in range(w):
-            x = np.float32(j) + flow[i, j, 0]
-            y = np.float32(i) + flow[i, j, 1]
-            if x != x or y != y:
-                x = np.float32(0.0)
-                y = np.float32(0.0)
-            x = min(max(x, np.float32(0.0)), xmax)
-            y = min(max(y, np.float32(0.0)), ymax)
-            x0 = min(int(np.floor(x)), w - 2) if w > 1 else 0
-            y0 = min(int(np.floor(y)), h - 2) if h > 1 else 0
-            x1 = min(x0 + 1, w - 1)
-            y1 = min(y0 + 1, h - 1)
-            fx = x - np.float32(x0)
-            fy = y - np.float32(y0)
+            x0, x1, y0, y1, fx, fy = bilinear_cell(np.float32(j) + flow[i, j, 0],
+                                                   np.float32(i) + flow[i, j, 1], h, w)
             acc = np.float32(0.0)
             for c in range(k):
-                top = frame1[y0, x0, c] * (one - fx) + frame1[y0, x1, c] * fx
-                bottom = frame1[y1, x0, c] * (one - fx) + frame1[y1, x1, c] * fx
-                acc += abs(frame0[i, j, c] - (top * (one - fy) + bottom * fy))
+                acc += abs(frame0[i, j, c] - bilinear_at(frame1, c, x0, x1, y0, y1, fx, fy))
             out[i, j] = acc / np.float32(k)
 
 

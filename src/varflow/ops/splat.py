@@ -87,6 +87,39 @@ def splat_numpy(values: np.ndarray, flow: np.ndarray, weights: np.ndarray,
     return acc, tot
 
 
+@nb.njit(cache=True, inline="always")
+def _scatter(px, py, vals, z, acc, tot):
+    """Add ``z · vals`` (1-D, K values) at the point ``(px, py)`` to the four pixels
+    around it with the bilinear weights (those inside the image)."""
+    h, w = tot.shape
+    if not (np.isfinite(px) and np.isfinite(py)):
+        return
+    fx0 = np.floor(px)
+    fy0 = np.floor(py)
+    if fx0 < -1.0 or fy0 < -1.0 or fx0 > w or fy0 > h:
+        return
+    x0 = int(fx0)
+    y0 = int(fy0)
+    fx = np.float64(px - fx0)
+    fy = np.float64(py - fy0)
+    for dy in range(2):
+        ty = y0 + dy
+        if ty < 0 or ty >= h:
+            continue
+        by = fy if dy == 1 else 1.0 - fy
+        for dx in range(2):
+            tx = x0 + dx
+            if tx < 0 or tx >= w:
+                continue
+            b = (fx if dx == 1 else 1.0 - fx) * by
+            if b <= 0.0:
+                continue
+            bz = b * z
+            tot[ty, tx] += bz
+            for c in range(vals.shape[0]):
+                acc[ty, tx, c] += np.float64(vals[c]) * bz
+
+
 @nb.njit(cache=True)
 def _splat_kernel(values, flow, weights, scale, acc, tot):
     h, w, k = values.shape
@@ -97,33 +130,7 @@ def _splat_kernel(values, flow, weights, scale, acc, tot):
                 continue
             px = np.float32(j) + scale * flow[i, j, 0]
             py = np.float32(i) + scale * flow[i, j, 1]
-            if not (np.isfinite(px) and np.isfinite(py)):
-                continue
-            fx0 = np.floor(px)
-            fy0 = np.floor(py)
-            if fx0 < -1.0 or fy0 < -1.0 or fx0 > w or fy0 > h:
-                continue
-            x0 = int(fx0)
-            y0 = int(fy0)
-            fx = np.float64(px - fx0)
-            fy = np.float64(py - fy0)
-            zz = np.float64(z)
-            for dy in range(2):
-                ty = y0 + dy
-                if ty < 0 or ty >= h:
-                    continue
-                by = fy if dy == 1 else 1.0 - fy
-                for dx in range(2):
-                    tx = x0 + dx
-                    if tx < 0 or tx >= w:
-                        continue
-                    b = (fx if dx == 1 else 1.0 - fx) * by
-                    if b <= 0.0:
-                        continue
-                    bz = b * zz
-                    tot[ty, tx] += bz
-                    for c in range(k):
-                        acc[ty, tx, c] += np.float64(values[i, j, c]) * bz
+            _scatter(px, py, values[i, j], np.float64(z), acc, tot)
 
 
 def splat(values: np.ndarray, flow: np.ndarray, weights: np.ndarray, scale: float = 1.0,
@@ -200,6 +207,7 @@ def _trajectory_kernel(flow, accel, weights, s, own_first, acc, tot):
     h, w = weights.shape
     half = (s * s - s) / np.float32(2.0)
     vals = np.empty(4, np.float64)
+    k = 0 if own_first else 2
     for i in range(h):
         for j in range(w):
             z = weights[i, j]
@@ -207,39 +215,11 @@ def _trajectory_kernel(flow, accel, weights, s, own_first, acc, tot):
                 continue
             dx = s * flow[i, j, 0] + accel[i, j, 0] * half
             dy = s * flow[i, j, 1] + accel[i, j, 1] * half
-            px = np.float32(j) + dx
-            py = np.float32(i) + dy
-            if not (np.isfinite(px) and np.isfinite(py)):
-                continue
-            fx0 = np.floor(px)
-            fy0 = np.floor(py)
-            if fx0 < -1.0 or fy0 < -1.0 or fx0 > w or fy0 > h:
-                continue
-            k = 0 if own_first else 2
             vals[k] = -dx
             vals[k + 1] = -dy
             vals[2 - k] = flow[i, j, 0] - dx
             vals[3 - k] = flow[i, j, 1] - dy
-            x0 = int(fx0)
-            y0 = int(fy0)
-            fx = np.float64(px - fx0)
-            fy = np.float64(py - fy0)
-            for ddy in range(2):
-                ty = y0 + ddy
-                if ty < 0 or ty >= h:
-                    continue
-                by = fy if ddy == 1 else 1.0 - fy
-                for ddx in range(2):
-                    tx = x0 + ddx
-                    if tx < 0 or tx >= w:
-                        continue
-                    b = (fx if ddx == 1 else 1.0 - fx) * by
-                    if b <= 0.0:
-                        continue
-                    bz = b * z
-                    tot[ty, tx] += bz
-                    for c in range(4):
-                        acc[ty, tx, c] += vals[c] * bz
+            _scatter(np.float32(j) + dx, np.float32(i) + dy, vals, np.float64(z), acc, tot)
 
 
 def splat_trajectories(flow: np.ndarray, accel: np.ndarray, weights: np.ndarray, time: float,

@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 
 __all__ = ["warp_bicubic", "warp_bicubic_numpy", "warp_bilinear", "warp_bilinear_numpy",
-           "keys_weights", "in_bounds"]
+           "keys_weights", "in_bounds", "bilinear_at", "bilinear_cell"]
 
 _A = -0.5
 
@@ -216,35 +216,46 @@ def warp_bilinear_numpy(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarra
     return (top * (1 - fy) + bottom * fy).astype(np.float32), inside
 
 
+@nb.njit(cache=True, inline="always")
+def bilinear_cell(x, y, h, w):
+    """The bilinear cell of the point ``(x, y)``, clamped into an ``h × w`` image:
+    ``(x0, x1, y0, y1, fx, fy)`` with the weights ``1 − fx, fx`` on columns ``x0, x1``
+    and ``1 − fy, fy`` on rows ``y0, y1``; a NaN point is the top-left pixel.  Shared
+    by the Numba kernels that sample bilinearly."""
+    if x != x or y != y:
+        x = np.float32(0.0)
+        y = np.float32(0.0)
+    x = min(max(x, np.float32(0.0)), np.float32(w - 1.0))
+    y = min(max(y, np.float32(0.0)), np.float32(h - 1.0))
+    x0 = min(int(np.floor(x)), w - 2) if w > 1 else 0
+    y0 = min(int(np.floor(y)), h - 2) if h > 1 else 0
+    return (x0, min(x0 + 1, w - 1), y0, min(y0 + 1, h - 1), x - np.float32(x0),
+            y - np.float32(y0))
+
+
+@nb.njit(cache=True, inline="always")
+def bilinear_at(img, c, x0, x1, y0, y1, fx, fy):
+    """Channel ``c`` of ``img`` (H, W, K) sampled in the cell of :func:`bilinear_cell`."""
+    one = np.float32(1.0)
+    top = img[y0, x0, c] * (one - fx) + img[y0, x1, c] * fx
+    bottom = img[y1, x0, c] * (one - fx) + img[y1, x1, c] * fx
+    return top * (one - fy) + bottom * fy
+
+
 @nb.njit(cache=True, parallel=True)
 def _bilinear_kernel(planes, flow, out, inside):
     """Bilinear samples of ``planes`` (H, W, K) at ``x + flow``; ``flow`` planar (2, H, W)."""
     h, w, k = planes.shape
     xmax = np.float32(w - 1.0)
     ymax = np.float32(h - 1.0)
-    one = np.float32(1.0)
     for i in nb.prange(h):
         for j in range(w):
             x = np.float32(j) + flow[0, i, j]
             y = np.float32(i) + flow[1, i, j]
-            if x != x or y != y:  # NaN flow
-                inside[i, j] = False
-                x = np.float32(0.0)
-                y = np.float32(0.0)
-            else:
-                inside[i, j] = x >= 0 and x <= xmax and y >= 0 and y <= ymax
-            x = min(max(x, np.float32(0.0)), xmax)
-            y = min(max(y, np.float32(0.0)), ymax)
-            x0 = min(int(np.floor(x)), w - 2) if w > 1 else 0
-            y0 = min(int(np.floor(y)), h - 2) if h > 1 else 0
-            x1 = min(x0 + 1, w - 1)
-            y1 = min(y0 + 1, h - 1)
-            fx = x - np.float32(x0)
-            fy = y - np.float32(y0)
+            inside[i, j] = x >= 0 and x <= xmax and y >= 0 and y <= ymax  # False for NaN
+            x0, x1, y0, y1, fx, fy = bilinear_cell(x, y, h, w)
             for c in range(k):
-                top = planes[y0, x0, c] * (one - fx) + planes[y0, x1, c] * fx
-                bottom = planes[y1, x0, c] * (one - fx) + planes[y1, x1, c] * fx
-                out[i, j, c] = top * (one - fy) + bottom * fy
+                out[i, j, c] = bilinear_at(planes, c, x0, x1, y0, y1, fx, fy)
 
 
 def warp_bilinear(planes: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
