@@ -1,8 +1,9 @@
-"""Shared fixtures: the location of the benchmark data."""
+"""Shared fixtures: the location of the benchmark data, one Numba thread."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,18 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "data: needs the benchmark data (VARFLOW_DATA); runs in CI (.ci/run)"
     )
+
+
+@pytest.fixture
+def one_numba_thread() -> Iterator[None]:
+    """Run a test with one Numba thread (small frames: faster, and steady on a loaded
+    machine), restoring the count afterwards."""
+    import numba
+
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(old)
 
 
 @pytest.fixture(scope="session")

@@ -3,8 +3,6 @@ kernels (forward splatting, outside-in hole filling, bilinear warping)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 
@@ -36,16 +34,8 @@ from varflow.retime.splatting import (
 )
 from varflow.retime.stream import retime_frames
 
-
-@pytest.fixture(autouse=True)
-def _one_numba_thread() -> Iterator[None]:
-    """Small frames: one thread is faster, and steady on a loaded machine."""
-    import numba
-
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+#: Small frames: one Numba thread is faster, and steady on a loaded machine.
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 def texture(h: int, w: int, shift: tuple[float, float] = (0.0, 0.0),

@@ -32,15 +32,8 @@ from varflow.retime.stream import (
 H, W = 48, 64
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread() -> Iterator[None]:
-    """Small frames: one thread is faster, and steady on a loaded machine."""
-    import numba
-
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+#: Small frames: one Numba thread is faster, and steady on a loaded machine.
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 def pan(n: int, speed: float, seed: int = 0) -> list[np.ndarray]:
