@@ -21,7 +21,7 @@ import numpy as np
 
 from ..registry import METHODS, TRACKERS, get_method, parameter_fields
 
-__all__ = ["PROG", "parameter_table"]
+__all__ = ["PROG", "parameter_rows", "parameter_table"]
 
 log = logging.getLogger("varflow.cli")
 
@@ -292,19 +292,19 @@ def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, An
     return given
 
 
-def parameter_table(method: str, markdown: bool = False) -> str:
-    """Table of a method's parameters: name, CLI flag, paper symbol, default, meaning.
+def parameter_rows(method: str) -> list[tuple[str, str, str, str]]:
+    """The rows of a method's parameter table: ``(name, symbol, repr(default), meaning)``.
 
     Parameters
     ----------
     method : str
         A registered two-frame, trajectory or interpolation method name.
-    markdown : bool
-        Markdown table (as in the README) instead of aligned text.
 
     Returns
     -------
-    str
+    list of (str, str, str, str)
+        Every field :func:`varflow.registry.parameter_fields` gives, in its order;
+        ``symbol`` the paper symbol of the field's docstring ("" when it has none).
     """
     from ..retime.methods import INTERPOLATORS
 
@@ -322,6 +322,24 @@ def parameter_table(method: str, markdown: bool = False) -> str:
         d = docs[owner].get(name)
         rows.append((name, d.symbol if d and d.symbol else "", repr(default),
                      d.meaning if d else ""))
+    return rows
+
+
+def parameter_table(method: str, markdown: bool = False) -> str:
+    """Table of a method's parameters: name, CLI flag, paper symbol, default, meaning.
+
+    Parameters
+    ----------
+    method : str
+        A registered two-frame, trajectory or interpolation method name.
+    markdown : bool
+        A Markdown table instead of aligned text.
+
+    Returns
+    -------
+    str
+    """
+    rows = parameter_rows(method)
     if markdown:
         lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]
         for name, sym, default, meaning in rows:

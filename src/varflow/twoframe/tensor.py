@@ -62,7 +62,7 @@ class TensorFields:
     Attributes
     ----------
     tensor_a : float
-        a of g(s) = exp(-a s^b), the weight across edges (s = |∇I| in intensity/pixel,
+        a of g(s) = exp(-a s^b), the weight across edges (``s = |∇I|`` in intensity/pixel,
         images in [0, 1]); 0 gives D = identity (isotropic TV).  Default 3.
     tensor_b : float
         b of g(s) = exp(-a s^b), > 0.  Default 0.5.
@@ -92,7 +92,7 @@ class TensorParams(TensorFields, PlainTVL1Params):
     Attributes
     ----------
     edge_weight : float
-        c of the isotropic edge weight exp(-c |∇I0|²) (the radius of the dual ball);
+        c of the isotropic edge weight ``exp(-c |∇I0|²)`` (the radius of the dual ball);
         the tensor already carries the edge information, so it is off here.  Default 0.
     """
 
@@ -112,11 +112,11 @@ class TVL1TensorParams(TensorFields, TVL1Params):
     Attributes
     ----------
     edge_weight : float
-        c of the isotropic edge weight exp(-c |∇I0|²) beside the tensor (the radius of
+        c of the isotropic edge weight ``exp(-c |∇I0|²)`` beside the tensor (the radius of
         the dual ball); 0 leaves the edges to the tensor alone.  Default 0 (better
         than 30 at every a on the photographic tuning split).
     tensor_a : float
-        a of g(s) = exp(-a s^b), the weight across edges (s = |∇I| in intensity/pixel,
+        a of g(s) = exp(-a s^b), the weight across edges (``s = |∇I|`` in intensity/pixel,
         images in [0, 1]); 0 gives D = identity (isotropic TV).  Default 0.5: on the
         photographic tuning split (21 pairs) mean AEE 0.076 / 0.076 / 0.077 / 0.078 /
         0.080 / 0.085 for a = 0 / 0.25 / 0.5 / 1 / 1.5 / 3 (edge weight 0; tvl1
@@ -137,7 +137,7 @@ def diffusion_tensor(
     ----------
     image : ndarray, shape (H, W, C), float32
     a, b : float
-        g(s) = max(exp(-a s^b), g_min) with s = |∇I| (square root of the principal
+        ``g(s) = max(exp(-a s^b), g_min)`` with ``s = |∇I|`` (square root of the principal
         eigenvalue of the channel-averaged structure tensor).
     sigma : float
         Gaussian smoothing of the structure tensor, pixels (0: none).

@@ -118,7 +118,7 @@ class TVL1Params(CoarseToFineParams):
         ε, stop when the root-mean-square update of the flow is below ε pixels
         (tested after every second iteration).  Default 0.01.
     edge_weight : float
-        c of the TV edge weight g(x) = exp(-c |∇I0|²) (|∇I0|² in intensity²/pixel²,
+        c of the TV edge weight ``g(x) = exp(-c |∇I0|²)`` (``|∇I0|²`` in intensity²/pixel²,
         averaged over channels, of the pre-processed frame); 0 gives g ≡ 1 (plain TV).
         Default 30 (tuning split and Middlebury; 50 for the plain energy).
     edge_weight_min : float
