@@ -9,7 +9,15 @@ import pytest
 from scipy import ndimage
 
 from varflow.viz.colorwheel import flow_to_color
-from varflow.viz.plots import HIDDEN_GREY, displacement_panels, draw_trajectories, grey_out
+from varflow.viz.plots import (
+    HIDDEN_GREY,
+    displacement_panels,
+    draw_tracks,
+    draw_trajectories,
+    grey_out,
+    sample_points,
+    track_animation,
+)
 
 F, H, W, REF = 5, 32, 48, 2
 
@@ -289,3 +297,66 @@ def test_grey_out_changes_only_hidden_pixels():
     assert grey_out(img[..., 0], vis).shape == (H, W)
     with pytest.raises(ValueError, match="visible"):
         grey_out(img, vis[:5])
+
+
+# --------------------------------------------------------------------------- TAP-Vid style
+
+
+def test_sample_points_spread_and_repeat() -> None:
+    ys, xs = sample_points((120, 160), 300, seed=3)
+    assert 0.8 * 300 <= ys.size <= 1.2 * 300
+    assert ys.min() >= 0 and ys.max() < 120 and xs.min() >= 0 and xs.max() < 160
+    again = sample_points((120, 160), 300, seed=3)
+    np.testing.assert_array_equal(ys, again[0])
+    np.testing.assert_array_equal(xs, again[1])
+    assert not np.array_equal(xs, sample_points((120, 160), 300, seed=4)[1])
+    # one point per cell: every quarter of the frame gets about a quarter of them
+    assert abs(int((xs < 80).sum()) - ys.size // 2) <= ys.size // 10
+    mask = np.zeros((120, 160), bool)
+    mask[:, :40] = True
+    _, xm = sample_points((120, 160), 300, seed=3, mask=mask)
+    assert xm.size > 0 and xm.max() < 40
+    with pytest.raises(ValueError, match="n must be"):
+        sample_points((10, 10), 0)
+
+
+def test_draw_tracks_tails_dots_and_hidden_parts() -> None:
+    """One point moving 6 px per frame to the right: its dot at its last position in
+    its colour, its tail back along the row; hidden in the last two frames: a grey
+    ring and dashed grey segments instead."""
+    traj = translation(6, 0)
+    img = draw_tracks(BLANK, traj, REF, points=1, line_width=1)
+    ys, xs = sample_points((H, W), 1)
+    y, x = int(ys[0]), int(xs[0])
+    last = x + 6 * (F - 1 - REF)
+    colour = img[y, min(last, W - 1)]
+    assert colour.any() and tuple(colour) != HIDDEN_GREY
+    row = drawn(img)[y]
+    first = x - 6 * REF
+    # the tail, frame 0 to the last (the dot's black outline aside)
+    assert row[max(first, 0):last - 3].all()
+    vis = np.ones((F, H, W), bool)
+    vis[-2:] = False
+    hidden = draw_tracks(BLANK, traj, REF, points=1, line_width=1, visibility=vis)
+    seg = hidden[y, x + 6 * (F - 3 - REF) + 1:min(last - 3, W)]  # the last two segments
+    assert (seg == HIDDEN_GREY).all(axis=1).any()
+    assert not (seg == colour).all(axis=1).any()
+    with pytest.raises(ValueError, match="frame_index"):
+        draw_tracks(BLANK, traj, REF, frame_index=F)
+    with pytest.raises(ValueError, match="tail"):
+        draw_tracks(BLANK, traj, REF, tail=-1)
+    with pytest.raises(ValueError, match="visibility"):
+        draw_tracks(BLANK, traj, REF, visibility=vis[:2])
+
+
+def test_track_animation_one_picture_per_frame() -> None:
+    traj = translation(3, 1)
+    frames = np.zeros((F, H, W, 3), np.uint8)
+    pictures = list(track_animation(frames, traj, REF, points=20, tail=2))
+    assert len(pictures) == F and all(p.shape == (H, W, 3) for p in pictures)
+    # frame n draws the dots where the points are in frame n
+    for n in (0, F - 1):
+        expect = draw_tracks(frames[n], traj, REF, frame_index=n, points=20, tail=2)
+        np.testing.assert_array_equal(pictures[n], expect)
+    with pytest.raises(ValueError, match="frames"):
+        list(track_animation(frames[:2], traj, REF))

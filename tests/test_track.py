@@ -135,7 +135,8 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
     out = tmp_path / "traj.npz"
     rc = cli.main(["track", str(d), "--ref", "2", "--method", method, "-o", str(out),
                    "--warped", str(tmp_path / "warped"), "--png", str(tmp_path / "png"),
-                   "--plot", str(tmp_path / "plot.png"), "--n-warps", "3", "-q"])
+                   "--plot", str(tmp_path / "plot.png"), "--animate", str(tmp_path / "t.gif"),
+                   "--plot-points", "50", "--n-warps", "3", "-q"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert f"{method}: 5 frames 96x72, reference 2" in printed and "% hidden" in printed
@@ -149,6 +150,10 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
     assert len(list((tmp_path / "warped").glob("*.png"))) == 5
     assert len(list((tmp_path / "png").glob("*.png"))) == 5
     assert (tmp_path / "plot.png").stat().st_size > 0
+    from PIL import Image
+
+    with Image.open(tmp_path / "t.gif") as gif:
+        assert gif.n_frames == 5 and gif.size == (96, 72)
     # the book's qualitative check, made quantitative: warped frames match the reference
     ref_img = s.clean_frames[2]
     vis = s.visibility[:5]
@@ -165,6 +170,10 @@ def test_cli_track_errors_are_one_line(tmp_path, capsys):
     assert rc == 2 and err.startswith("varflow: error: ") and len(err.splitlines()) == 1
     rc = cli.main(["track", str(tmp_path), "-o", str(tmp_path / "t.txt")])
     assert rc == 2 and ".npz" in capsys.readouterr().err
+    rc = cli.main(["track", str(tmp_path), "-o", str(tmp_path / "t.npz"), "--animate",
+                   str(tmp_path / "a.txt")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--animate" in err and ".gif" in err and len(err.splitlines()) == 1
 
 
 def test_top_level_exports_resolve():

@@ -3,7 +3,8 @@
 Synopsis::
 
     varflow track FRAME... -o OUT.npz [--ref K] [--method NAME] [--warped DIR] [--png DIR]
-                  [--plot PLOT.png] [--plot-step PX] [--max-radius R] [--quiet]
+                  [--plot PLOT.png] [--animate TRACKS.mp4] [--plot-points N]
+                  [--max-radius R] [--quiet]
                   [--<parameter> VALUE ...]
 """
 
@@ -31,6 +32,7 @@ from ._common import (
     _Progress,
     _to_uint8,
     chosen_methods,
+    int_at_least,
 )
 
 __all__ = ["add_parser"]
@@ -61,10 +63,13 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
                    "frame (displacement_NNNN.png, one colour scale)")
     p.add_argument("--plot", metavar="PLOT.png",
-                   help="draw sampled trajectories over the reference frame (grey where "
-                   "hidden)")
-    p.add_argument("--plot-step", type=int, default=16, metavar="PX",
-                   help="grid step of the plotted trajectories (default 16)")
+                   help="draw the tracks of sampled points over the last frame, as TAP-Vid "
+                   "does: coloured tails through every frame, dashed grey where hidden")
+    p.add_argument("--animate", metavar="TRACKS.mp4",
+                   help="a video (.mp4, .mkv, ...) or animated .gif of the tracks: every "
+                   "frame with the points' last 10 positions")
+    p.add_argument("--plot-points", type=int_at_least(1), default=300, metavar="N",
+                   help="about N points in --plot and --animate (default 300)")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="displacement of full colour saturation for --png (default: maximum)")
     p.add_argument("-q", "--quiet", action="store_true",
@@ -81,12 +86,18 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from varflow.multiframe.track import check_frames, default_ref
     from varflow.ops.warp import warp_bicubic
     from varflow.viz import flow_to_color
-    from varflow.viz.plots import draw_trajectories, grey_out
+    from varflow.viz.plots import draw_tracks, grey_out, track_animation
 
     tracker = get_tracker(args.method)
     params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
     out = _check_output(args.output, (".npz",), "-o/--output")
     plot = _check_output(args.plot, None, "--plot") if args.plot else None
+    animate = None
+    if args.animate:
+        from varflow.io.video import VIDEO_WRITE_EXTENSIONS
+
+        animate = _check_output(args.animate, (".gif", *sorted(VIDEO_WRITE_EXTENSIONS)),
+                                "--animate")
     dirs = {}
     for flag, value in (("--warped", args.warped), ("--png", args.png)):
         if value:
@@ -122,8 +133,11 @@ def _cmd_track(args: argparse.Namespace) -> int:
             write_image(dirs["--png"] / f"displacement_{n:04d}.png",
                         flow_to_color(traj[n], max_radius=radius))
     if plot is not None:
-        write_image(plot, draw_trajectories(raw[ref], traj, ref, step=args.plot_step,
-                                            visibility=visible))
+        write_image(plot, draw_tracks(raw[-1], traj, ref, visibility=visible,
+                                      points=args.plot_points))
+    if animate is not None:
+        pictures = track_animation(raw, traj, ref, visibility=visible, points=args.plot_points)
+        _write_animation(animate, pictures)
     others = np.arange(n_f) != ref
     hidden = float(1.0 - visible[others].mean()) if others.any() else 0.0
     print(f"{tracker.name}: {n_f} frames {w}x{h}, reference {ref}, in {seconds:.2f} s, "
@@ -132,4 +146,31 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"  {flag[2:]}: {d}")
     if plot is not None:
         print(f"  plot: {plot}")
+    if animate is not None:
+        print(f"  animation: {animate}")
     return 0
+
+
+def _write_animation(path: Path, pictures: Any, fps: int = 10) -> None:
+    """The pictures as a video (the writer's codec for the extension) or an animated GIF,
+    atomically."""
+    if path.suffix.lower() != ".gif":
+        from varflow.io.video import write_video
+
+        write_video(path, list(pictures), fps)
+        return
+    import os
+    import tempfile
+
+    from PIL import Image
+
+    images = [Image.fromarray(p) for p in pictures]
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".gif", dir=path.parent)
+    os.close(fd)
+    try:
+        images[0].save(tmp, save_all=True, append_images=images[1:], duration=1000 // fps,
+                       loop=0)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,5 +1,9 @@
 """Pictures of dense multi-frame trajectories (Pillow only, no Matplotlib).
 
+* :func:`draw_tracks` draws what trajectory papers and TAP-Vid draw: a few hundred
+  points, each with a coloured tail of its past positions, over one frame of the clip
+  in colour; hidden parts dashed in grey, hidden points as rings.
+  :func:`track_animation` draws it for every frame (a video of the tracks).
 * :func:`draw_trajectories` draws a grid of sampled trajectories as polylines over
   a dimmed grey copy of the reference frame.
 * :func:`displacement_panels` tiles the Middlebury colour coding of the
@@ -26,7 +30,8 @@ from PIL import Image, ImageDraw, ImageFont
 from .._validate import as_float_image
 from .colorwheel import color_wheel, flow_to_color
 
-__all__ = ["draw_trajectories", "displacement_panels", "grey_out", "HIDDEN_GREY"]
+__all__ = ["draw_trajectories", "draw_tracks", "displacement_panels", "grey_out",
+           "sample_points", "track_animation", "HIDDEN_GREY"]
 
 logger = logging.getLogger(__name__)
 
@@ -423,3 +428,252 @@ def grey_out(image: np.ndarray, visible: np.ndarray) -> np.ndarray:
     out[hidden] = (0.25 * img[hidden].astype(np.float32) + 96.0).round().astype(np.uint8)
     return out
 
+
+
+# --------------------------------------------------------------------------- TAP-Vid style
+
+#: Points :func:`draw_tracks` samples by default.
+DEFAULT_POINTS = 300
+#: Length and gap of the dashes of hidden segments, pixels.
+_DASH = (4.0, 3.0)
+
+
+def sample_points(shape: tuple[int, int], n: int, seed: int = 0,
+                  mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """About ``n`` reference pixels spread over the frame: one per cell of a grid, jittered.
+
+    The grid has about ``n`` square cells; each cell gives one pixel drawn uniformly
+    inside it by a generator seeded with ``seed`` (the same points on every call).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        ``(H, W)``.
+    n : int
+        Points wanted, >= 1.
+    seed : int
+    mask : ndarray, shape (H, W), bool, optional
+        Only pixels where it is True (cells whose drawn pixel is outside the mask are
+        dropped).
+
+    Returns
+    -------
+    ys, xs : ndarray of int
+        Rows and columns, in raster order of the cells.
+    """
+    h, w = int(shape[0]), int(shape[1])
+    if not _is_int(n) or n < 1:
+        raise ValueError(f"sample_points: n must be an integer >= 1, got {n!r}")
+    cell = max(1.0, math.sqrt(h * w / n))
+    rows, cols = max(1, round(h / cell)), max(1, round(w / cell))
+    edges_y = np.linspace(0, h, rows + 1)
+    edges_x = np.linspace(0, w, cols + 1)
+    rng = np.random.default_rng(seed)
+    gy, gx = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    ys = np.floor(edges_y[gy] + rng.random(gy.shape) * (edges_y[gy + 1] - edges_y[gy]))
+    xs = np.floor(edges_x[gx] + rng.random(gx.shape) * (edges_x[gx + 1] - edges_x[gx]))
+    ys = np.clip(ys.ravel().astype(np.int64), 0, h - 1)
+    xs = np.clip(xs.ravel().astype(np.int64), 0, w - 1)
+    if mask is not None:
+        m = np.asarray(mask, bool)
+        if m.shape != (h, w):
+            raise ValueError(f"sample_points: mask must have shape {(h, w)}, got {m.shape}")
+        keep = m[ys, xs]
+        ys, xs = ys[keep], xs[keep]
+    return ys, xs
+
+
+def _position_colours(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A colour per point from its place in the reference frame: the Middlebury wheel of
+    the vector from the frame's centre (neighbours get similar colours, as in TAP-Vid's
+    pictures, and the colours span the wheel)."""
+    h, w = shape
+    v = np.stack([(xs - (w - 1) / 2) / max(w / 2, 1), (ys - (h - 1) / 2) / max(h / 2, 1)], -1)
+    v = v / max(float(np.abs(v).max()), 1e-9) * 0.95
+    return flow_to_color(v[None].astype(np.float32), max_radius=1.0)[0]
+
+
+def _colour_frame(frame: Any, shape: tuple[int, int], fn: str) -> np.ndarray:
+    arr = np.asarray(frame)
+    if arr.shape[:2] != shape or arr.ndim not in (2, 3):
+        raise ValueError(f"{fn}: frame must have shape (H, W) or (H, W, C) with (H, W) = "
+                         f"{shape} as in traj, got {arr.shape}")
+    img = as_float_image(arr, name=f"{fn}: frame")
+    rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
+    return np.floor(255.0 * np.clip(rgb, 0, 1) + 0.5).astype(np.uint8)
+
+
+def _dashed(draw: ImageDraw.ImageDraw, a: tuple[float, float], b: tuple[float, float],
+            fill: tuple[int, int, int], width: int) -> None:
+    length = math.hypot(b[0] - a[0], b[1] - a[1])
+    if length == 0:
+        return
+    on, off = _DASH
+    t = 0.0
+    while t < length:
+        t1 = min(t + on, length)
+        p = (a[0] + (b[0] - a[0]) * t / length, a[1] + (b[1] - a[1]) * t / length)
+        q = (a[0] + (b[0] - a[0]) * t1 / length, a[1] + (b[1] - a[1]) * t1 / length)
+        draw.line([p, q], fill=fill, width=width)
+        t = t1 + off
+
+
+def _tracks_on(image: Image.Image, pos: np.ndarray, known: np.ndarray, seen: np.ndarray,
+               colours: np.ndarray, upto: int, tail: int, line_width: int) -> None:
+    """Tails of frames ``upto - tail … upto`` and the points of frame ``upto``."""
+    draw = ImageDraw.Draw(image)
+    start = max(0, upto - tail)
+    r = line_width + 1.5
+    for k in range(pos.shape[1]):
+        fill = tuple(int(c) for c in colours[k])
+        for n in range(start, upto):
+            if not (known[n, k] and known[n + 1, k]):
+                continue
+            a, b = tuple(pos[n, k]), tuple(pos[n + 1, k])
+            if seen[n, k] and seen[n + 1, k]:
+                draw.line([a, b], fill=fill, width=line_width)
+            else:
+                _dashed(draw, a, b, HIDDEN_GREY, line_width)
+        if known[upto, k]:
+            x, y = pos[upto, k]
+            box = [x - r, y - r, x + r, y + r]
+            if seen[upto, k]:
+                draw.ellipse(box, fill=fill, outline=(0, 0, 0))
+            else:
+                draw.ellipse(box, outline=HIDDEN_GREY, width=1)
+
+
+def _track_setup(traj: Any, ref: Any, visibility: Any, points: int, seed: int,
+                 mask: Any, fn: str):
+    uv = _check_traj(traj, fn)
+    n_frames, height, width = uv.shape[:3]
+    ref = _check_ref(ref, n_frames, fn)
+    ys, xs = sample_points((height, width), points, seed, mask)
+    track_uv = uv[:, ys, xs]
+    known = np.isfinite(track_uv).all(axis=2)
+    if visibility is None:
+        seen = np.ones_like(known)
+    else:
+        vis = np.asarray(visibility)
+        if vis.shape != (n_frames, height, width) or vis.dtype != np.bool_:
+            raise ValueError(f"{fn}: visibility must be a boolean array of shape "
+                             f"{(n_frames, height, width)}, got {vis.dtype} {vis.shape}")
+        seen = vis[:, ys, xs]
+    pos = np.stack([xs, ys], axis=-1)[None] + np.nan_to_num(track_uv)
+    pos = np.clip(pos, -_COORD_LIMIT, _COORD_LIMIT)
+    colours = _position_colours(ys, xs, (height, width))
+    return uv, ref, pos, known, seen, colours
+
+
+def draw_tracks(
+    frame: np.ndarray,
+    traj: np.ndarray,
+    ref: int,
+    frame_index: int | None = None,
+    *,
+    points: int = DEFAULT_POINTS,
+    tail: int | None = None,
+    visibility: np.ndarray | None = None,
+    line_width: int = 2,
+    seed: int = 0,
+    mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """Tracks as TAP-Vid draws them: sampled points with coloured tails over a frame.
+
+    About ``points`` reference pixels (:func:`sample_points`), each coloured by its
+    place in the reference frame; over ``frame`` (frame ``frame_index`` of the clip,
+    in colour), each point's positions in the frames ``frame_index − tail`` …
+    ``frame_index`` are joined into its tail, and a dot marks where it is in
+    ``frame_index``.  Where the point is hidden (``visibility`` False) the tail is
+    dashed in grey (:data:`HIDDEN_GREY`) and the dot is a grey ring.
+
+    Parameters
+    ----------
+    frame : ndarray, shape (H, W) or (H, W, C)
+        The frame to draw on (uint8, uint16 or float in [0, 1]).
+    traj : ndarray, shape (F, H, W, 2)
+        Trajectories relative to the reference frame; NaN where unknown.
+    ref : int
+        Index of the reference frame.
+    frame_index : int, optional
+        Which frame ``frame`` is (default the last, so that the tails run through
+        the whole clip).
+    points : int
+        About this many points.
+    tail : int, optional
+        Frames of history in each tail (default all, back to frame 0).
+    visibility : ndarray, shape (F, H, W), bool, optional
+    line_width : int
+        Width of the tails, pixels (dots have radius ``line_width + 1.5``).
+    seed : int
+        Seeds the choice of the points.
+    mask : ndarray, shape (H, W), bool, optional
+        Only points whose reference pixel is in the mask.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), uint8
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes or values (the message names the argument).
+    """
+    fn = "draw_tracks"
+    uv, ref, pos, known, seen, colours = _track_setup(traj, ref, visibility, points, seed,
+                                                      mask, fn)
+    n_frames = uv.shape[0]
+    upto = n_frames - 1 if frame_index is None else frame_index
+    if not _is_int(upto) or not 0 <= upto < n_frames:
+        raise ValueError(f"{fn}: frame_index must be an integer in 0..{n_frames - 1}, "
+                         f"got {frame_index!r}")
+    if tail is not None and (not _is_int(tail) or tail < 0):
+        raise ValueError(f"{fn}: tail must be an integer >= 0, got {tail!r}")
+    if not _is_int(line_width) or line_width < 1:
+        raise ValueError(f"{fn}: line_width must be an integer >= 1, got {line_width!r}")
+    image = Image.fromarray(_colour_frame(frame, uv.shape[1:3], fn))
+    _tracks_on(image, pos, known, seen, colours, int(upto), n_frames if tail is None else tail,
+               line_width)
+    return np.asarray(image, dtype=np.uint8).copy()
+
+
+def track_animation(
+    frames: np.ndarray,
+    traj: np.ndarray,
+    ref: int,
+    *,
+    points: int = DEFAULT_POINTS,
+    tail: int = 10,
+    visibility: np.ndarray | None = None,
+    line_width: int = 2,
+    seed: int = 0,
+    mask: np.ndarray | None = None,
+):
+    """:func:`draw_tracks` for every frame of the clip, in order: a video of the tracks.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (F, H, W[, C])
+        The clip (the frame ``n`` of the output is drawn on ``frames[n]``).
+    traj, ref, points, visibility, line_width, seed, mask
+        As :func:`draw_tracks`.
+    tail : int
+        Frames of history in each tail (default 10).
+
+    Yields
+    ------
+    ndarray, shape (H, W, 3), uint8
+        One picture per frame (a generator: write them as they come).
+    """
+    fn = "track_animation"
+    uv, ref, pos, known, seen, colours = _track_setup(traj, ref, visibility, points, seed,
+                                                      mask, fn)
+    clip = np.asarray(frames)
+    if clip.shape[0] != uv.shape[0]:
+        raise ValueError(f"{fn}: frames has {clip.shape[0]} frames, traj {uv.shape[0]}")
+    if not _is_int(tail) or tail < 0:
+        raise ValueError(f"{fn}: tail must be an integer >= 0, got {tail!r}")
+    for n in range(uv.shape[0]):
+        image = Image.fromarray(_colour_frame(clip[n], uv.shape[1:3], fn))
+        _tracks_on(image, pos, known, seen, colours, n, tail, line_width)
+        yield np.asarray(image, dtype=np.uint8).copy()
