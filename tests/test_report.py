@@ -657,6 +657,25 @@ def test_browser_renders_bench_chart(browser: DevTools, tmp_path: Path,
                             tol=2)
 
 
+def test_browser_shows_flow_truth_and_error_side_by_side(
+        browser: DevTools, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A flow with its ground truth: the estimate, the truth and the error map in one
+    row, their tops level and left to right, not stacked."""
+    est = uniform(30, 40, 1.0, 1.5)
+    write_flo(tmp_path / "est.flo", est)
+    write_flo(tmp_path / "gt.flo", uniform(30, 40, 2.0, 1.5))
+    out = tmp_path / "f.html"
+    rc, _, err = run(capsys, "report", tmp_path / "est.flo", "--gt", tmp_path / "gt.flo",
+                     "-o", out)
+    assert rc == 0, err
+    browser.load(out.as_uri())
+    assert browser.problems() == []
+    boxes = {b["role"]: b for b in json.loads(browser.evaluate(_IMAGES_JS))}
+    flow, truth, error = boxes["flow"], boxes["gt"], boxes["error"]
+    assert flow["y"] == pytest.approx(truth["y"], abs=1) == pytest.approx(error["y"], abs=1)
+    assert flow["x"] + flow["w"] <= truth["x"] and truth["x"] + truth["w"] <= error["x"]
+
+
 def test_browser_detects_console_errors(browser: DevTools, tmp_path: Path) -> None:
     """The check above is meaningful: errors of a broken page are all reported."""
     bad = tmp_path / "bad.html"

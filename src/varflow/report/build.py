@@ -600,12 +600,28 @@ def _single_flow(page: Page, path: Path, gt_path: str | os.PathLike[str] | None)
         figs.append(page.image(gimg, role="gt", caption=f"ground truth {Path(gt_path).name}",
                                extra={"scale": f"{scale:.6g}"}))
     figs.append(_legend(page, scale))
-    page.add('<div class="thumbs">' + "".join(figs) + "</div>")
-    page.add(table(("size", "mean |w| px", "max |w| px", "unknown %"),
-                   [(_size(flow.shape), mean, top, unknown)], cls="stats"))
     if gt is None:
+        page.add('<div class="thumbs">' + "".join(figs) + "</div>")
+        page.add(table(("size", "mean |w| px", "max |w| px", "unknown %"),
+                       [(_size(flow.shape), mean, top, unknown)], cls="stats"))
         page.para("No ground truth given (--gt GT.flo adds the error map and AEE/AAE/RMS/R1/R3).")
         return
+    # the estimate, the ground truth and the error map side by side, in one row
+    epe = endpoint_error_map(flow, gt)
+    known = epe[np.isfinite(epe)]
+    vmax = max(1.0, float(np.percentile(known, 99))) if known.size else 1.0
+    emap = downscale(error_map(epe, vmax), LARGE_SIDE)
+    bar = error_colorbar(256, 14)
+    figs += [page.image(emap, role="error", caption="endpoint error",
+                        extra={"vmax": f"{vmax:.6g}"}),
+             page.image(bar, role="colorbar", caption=f"0 px … {vmax:.3g} px",
+                        extra={"vmax": f"{vmax:.6g}"})]
+    page.add('<div class="thumbs">' + "".join(figs) + "</div>")
+    page.para(f"Endpoint error map: dark blue 0 px to yellow {vmax:.3g} px (the 99th "
+              f"percentile, at least 1 px; larger errors clipped); grey: no ground truth or "
+              f"estimate; {_size_note(flow.shape, emap.shape)}.")
+    page.add(table(("size", "mean |w| px", "max |w| px", "unknown %"),
+                   [(_size(flow.shape), mean, top, unknown)], cls="stats"))
     scores = evaluate(flow, gt)
     page.heading("Error against the ground truth", level=2, anchor="error")
     labels = (("aee", "AEE", "px"), ("aae", "AAE", "deg"), ("rms", "RMS", "px"),
@@ -614,20 +630,6 @@ def _single_flow(page: Page, path: Path, gt_path: str | os.PathLike[str] | None)
     page.add(table(("measure", "value", "unit"),
                    [(lab, scores[k], u) for k, lab, u in labels if k in scores], n_text=1,
                    cls="metrics"))
-    epe = endpoint_error_map(flow, gt)
-    known = epe[np.isfinite(epe)]
-    vmax = max(1.0, float(np.percentile(known, 99))) if known.size else 1.0
-    emap = downscale(error_map(epe, vmax), LARGE_SIDE)
-    bar = error_colorbar(256, 14)
-    page.para(f"Endpoint error map: dark blue 0 px to yellow {vmax:.3g} px (the 99th "
-              f"percentile, at least 1 px; larger errors clipped); grey: no ground truth or "
-              f"estimate; {_size_note(flow.shape, emap.shape)}.")
-    page.add('<div class="thumbs">'
-             + page.image(emap, role="error", caption="endpoint error",
-                          extra={"vmax": f"{vmax:.6g}"})
-             + page.image(bar, role="colorbar", caption=f"0 px … {vmax:.3g} px",
-                          extra={"vmax": f"{vmax:.6g}"})
-             + "</div>")
 
 
 def _single_trajectories(page: Page, path: Path, frames: str | os.PathLike[str] | None,
