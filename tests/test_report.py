@@ -45,7 +45,11 @@ def run(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, st
 
 
 class _Doc(HTMLParser):
-    """Images, tables (cell texts), headings, tags and text of a report."""
+    """Images, tables (cell texts), headings, tags and text of a report.
+
+    Each image also gets ``_row`` (number of its enclosing ``div.thumbs`` row, -1 for
+    none) and ``_pair`` (number of its enclosing ``div.pair`` group, -1 for none).
+    """
 
     def __init__(self) -> None:
         super().__init__(convert_charrefs=True)
@@ -59,11 +63,21 @@ class _Doc(HTMLParser):
         self._row: list[str] | None = None
         self._heading: list[str] | None = None
         self._bold = False
+        self._divs: list[tuple[str, int]] = []  # (class, number) of the open divs
+        self._n_divs = 0
+
+    def _inside(self, cls: str) -> int:
+        return next((n for c, n in reversed(self._divs) if cls in c.split()), -1)
 
     def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
         a = {k: v or "" for k, v in attrs}
         self.tags.add(tag)
+        if tag == "div":
+            self._n_divs += 1
+            self._divs.append((a.get("class", ""), self._n_divs))
         if tag == "img":
+            a["_row"] = str(self._inside("thumbs"))
+            a["_pair"] = str(self._inside("pair"))
             self.images.append(a)
         elif tag == "rect":
             self.svg_rects.append(a)
@@ -78,6 +92,8 @@ class _Doc(HTMLParser):
             self._heading = []
 
     def handle_endtag(self, tag: str) -> None:
+        if tag == "div" and self._divs:
+            self._divs.pop()
         if tag in ("td", "th") and self._cell is not None and self._row is not None:
             text = "".join(self._cell).strip()
             self._row.append(text)
@@ -370,6 +386,101 @@ def test_batch_pairs_running_and_failed_input(
     assert "Unreadable" not in text
 
 
+def frame_value(k: int) -> int:
+    """Grey level of frame k of the inputs of :func:`make_flow_batch`."""
+    return 10 + 20 * k
+
+
+def make_flow_batch(root: Path, source: Path, n_flows: int = 9, video: bool = False) -> Path:
+    """A ``varflow batch flow`` folder of ``n_flows`` flows of the pairs (n, n + 1) of
+    ``source``: a frame folder (PNG) or, with ``video``, a lossless FFV1 video whose
+    frame k is the grey level :func:`frame_value` (k)."""
+    from varflow.io.video import write_video
+
+    frames = [np.full(FLOW_SHAPE + (3,), frame_value(k), np.uint8) for k in range(n_flows + 1)]
+    if video:
+        write_video(source, frames, 10, codec="ffv1", pix_fmt="bgr0")
+    else:
+        source.mkdir(parents=True)
+        for k, f in enumerate(frames):
+            write_image(source / f"img{k}.png", f)  # natural order: img2 before img10
+    (root / "clip").mkdir(parents=True)
+    tasks = []
+    for n in range(n_flows):
+        write_flo(root / "clip" / f"{n:06d}.flo", uniform(*FLOW_SHAPE, flow_u(n), 0.0))
+        tasks.append((f"clip/{n:06d}.flo", str(source), "clip", "flow", json.dumps([n, n + 1]),
+                      "tvl1", "{}", "0.1.0", f"clip/{n:06d}.flo", "x", "done", None, 1.0, 1,
+                      0.0))
+    write_manifest(root, tasks, [("stride", "1")])
+    return root
+
+
+@pytest.mark.parametrize("video", [False, True], ids=["frame folder", "video"])
+def test_batch_flows_beside_their_frames(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch, video: bool) -> None:
+    """Each flow thumbnail is paired with frame i of its pair (i, j), read from the input
+    recorded in the manifest, each frame once (a video: the chosen frames only)."""
+    from varflow.io.video import VideoReader
+
+    calls: list[list[int]] = []
+    original = VideoReader.read_indices
+
+    def spy(self: VideoReader, indices: list[int]) -> np.ndarray:
+        calls.append(list(indices))
+        return original(self, indices)
+
+    monkeypatch.setattr(VideoReader, "read_indices", spy)
+    source = tmp_path / ("clip.mkv" if video else "frames")
+    root = make_flow_batch(tmp_path / "out", source, video=video)
+    out = tmp_path / "r.html"
+    rc, _, err = run(capsys, "report", root, "-o", out, "--max-frames", 4)
+    assert rc == 0, err
+    text, doc = parse(out)
+    assert_self_contained(text, doc)
+    flows, frames = doc.role("flow"), doc.role("frame")
+    assert [int(i["data-frame"]) for i in flows] == [0, 3, 5, 8]
+    assert [int(i["data-frame"]) for i in frames] == [0, 3, 5, 8]
+    for frame, flow in zip(frames, flows, strict=True):
+        # frame | flow, in one group of the row, at the thumbnail size
+        assert frame["_pair"] == flow["_pair"] != "-1" and frame["_row"] == flow["_row"]
+        assert (frame["width"], frame["height"]) == (flow["width"], flow["height"])
+        pixels = decode(frame)
+        assert pixels.shape == FLOW_SHAPE + (3,)
+        assert np.abs(pixels.astype(int) - frame_value(int(frame["data-frame"]))).max() <= 1
+    assert len({i["_pair"] for i in flows}) == 4
+    assert f"from the input {source}" in text
+    assert calls == ([[0, 3, 5, 8]] if video else [])
+
+
+def test_batch_flows_without_their_input(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """The input was deleted (a report made on another machine): the flows alone and one
+    note saying why; a frame folder too short for the pairs likewise."""
+    source = tmp_path / "frames"
+    root = make_flow_batch(tmp_path / "out", source)
+    for f in source.iterdir():
+        f.unlink()
+    source.rmdir()
+    out = tmp_path / "r.html"
+    rc, _, err = run(capsys, "report", root, "-o", out, "--max-frames", 4)
+    assert rc == 0, err
+    text, doc = parse(out)
+    assert len(doc.role("flow")) == 4 and not doc.role("frame")
+    assert all(i["_pair"] == "-1" for i in doc.role("flow"))
+    notes = [t for t in doc.text if t.startswith("Input frames not shown")]
+    assert notes == [f"Input frames not shown: input not found: {source}; the flows are shown "
+                     f"alone."]
+    # only 3 of the 10 frames left: frame 8 is missing
+    root2 = make_flow_batch(tmp_path / "out2", tmp_path / "frames2")
+    for k in range(3, 10):
+        (tmp_path / "frames2" / f"img{k}.png").unlink()
+    rc, _, err = run(capsys, "report", root2, "-o", out, "--max-frames", 4)
+    assert rc == 0, err
+    text, doc = parse(out)
+    assert len(doc.role("flow")) == 4 and not doc.role("frame")
+    assert "has 3 images, the flows need frame 8" in text
+
+
 # --------------------------------------------------------------------------- bench CSV
 
 
@@ -480,6 +591,111 @@ def test_kitti_flow_without_ground_truth(
     assert not doc.role("error") and "No ground truth given" in text
 
 
+def texture(h: int, w: int, dx: float = 0.0, dy: float = 0.0) -> np.ndarray:
+    """A smooth grey texture on 0..255 sampled at ``(x - dx, y - dy)``: the texture at
+    ``(0, 0)`` translated by ``(dx, dy)``, so that ``texture(dx, dy)(x + d) =
+    texture(0, 0)(x)``."""
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    x, y = xx - dx, yy - dy
+    return 128 + 60 * np.sin(0.3 * x + 0.2 * y) + 40 * np.cos(0.25 * y - 0.15 * x)
+
+
+def photometric(img: dict[str, str]) -> float:
+    """The photometric error stated in the caption (alt text) of the warped image,
+    checked against its ``data-photometric``."""
+    stated = float(re.search(r"photometric error (\d+\.\d+) ", img["alt"]).group(1))
+    assert stated == pytest.approx(float(img["data-photometric"]), abs=0.006)
+    return stated
+
+
+ROW_ROLES = ["frame0", "frame1", "warped", "flow", "gt", "legend", "error", "colorbar"]
+
+
+def test_flow_with_frames_in_one_row(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--frames F0 F1: the frames, frame 1 warped back, the estimate, the truth and the
+    error map in one row at one size; the warped frame's photometric error is small for
+    the exact flow of a translated texture and large for a wrong one."""
+    h, w = 90, 120
+    u, v = 1.3, -0.7  # sub-pixel
+    frame0 = np.rint(texture(h, w)).astype(np.uint8)
+    write_image(tmp_path / "f0.png", frame0)
+    write_image(tmp_path / "f1.png", np.rint(texture(h, w, u, v)).astype(np.uint8))
+    write_flo(tmp_path / "est.flo", uniform(h, w, u, v))
+    write_flo(tmp_path / "gt.flo", uniform(h, w, u, v + 0.5))
+    write_flo(tmp_path / "zero.flo", uniform(h, w, 0.0, 0.0))
+    out = tmp_path / "f.html"
+    rc, _, err = run(capsys, "report", tmp_path / "est.flo", "--gt", tmp_path / "gt.flo",
+                     "--frames", tmp_path / "f0.png", tmp_path / "f1.png", "-o", out)
+    assert rc == 0, err
+    text, doc = parse(out)
+    assert_self_contained(text, doc)
+    row = [i for i in doc.images if i["_row"] == doc.role("flow")[0]["_row"]]
+    assert [i["data-role"] for i in row] == ROW_ROLES  # one row, in this order
+    big = [i for i in row if i["data-role"] not in ("legend", "colorbar")]
+    assert {(i["width"], i["height"]) for i in big} == {(str(w), str(h))}  # one shown size
+    assert all(decode(i).shape == (h, w, 3) for i in big)
+    # the frames are shown as they are (grey -> equal RGB channels)
+    assert (decode(doc.role("frame0")[0]) == frame0[..., None]).all()
+    assert "f1.png" in doc.role("frame1")[0]["alt"]
+    # frame 1 warped back by the exact flow is frame 0, up to interpolation and rounding
+    warped = doc.role("warped")[0]
+    assert photometric(warped) < 2.0
+    assert float(warped["data-inside"]) == pytest.approx(
+        (w - 2) * (h - 1) / (w * h), abs=0.01)  # x + 1.3 > w - 1 and y - 0.7 < 0 leave
+    inside = decode(warped)[5:-5, 5:-5].astype(int)
+    assert np.abs(inside - frame0[5:-5, 5:-5, None]).mean() < 2.0
+    assert "frames: " in text and str((tmp_path / "f1.png").resolve()) in text
+    # a wrong flow: a large photometric error
+    rc, _, err = run(capsys, "report", tmp_path / "zero.flo", "--frames", tmp_path / "f0.png",
+                     tmp_path / "f1.png", "-o", out)
+    assert rc == 0, err
+    _, doc = parse(out)
+    assert photometric(doc.role("warped")[0]) > 10.0
+    assert float(doc.role("warped")[0]["data-inside"]) == 1.0
+    row = [i for i in doc.images if i["_row"] == doc.role("flow")[0]["_row"]]
+    assert [i["data-role"] for i in row] == ["frame0", "frame1", "warped", "flow", "legend"]
+
+
+@pytest.mark.parametrize("kind", ["uint8 colour", "uint16 grey", "float32 grey"])
+def test_flow_frames_of_any_type(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                 kind: str) -> None:
+    """Grey or colour, 8-bit, 16-bit or float frames are shown as they look, box-filtered
+    to the row's size with the flow; one frame alone gives no warped image."""
+    h, w = 300, 800
+    grad = np.linspace(0.0, 1.0, w)[None, :].repeat(h, axis=0)  # dark left, bright right
+    expected = np.floor(255 * grad + 0.5)
+    if kind == "uint8 colour":
+        frame = np.zeros((h, w, 3), np.uint8)
+        frame[..., 0] = np.rint(255 * grad)
+        frame[..., 2] = 200
+        write_image(tmp_path / "f0.png", frame)
+        expected = np.stack([expected, np.zeros_like(expected), np.full_like(expected, 200)], -1)
+        name = "f0.png"
+    elif kind == "uint16 grey":
+        write_image(tmp_path / "f0.png", np.rint(65535 * grad).astype(np.uint16))
+        expected = np.repeat(expected[..., None], 3, axis=2)
+        name = "f0.png"
+    else:
+        Image.fromarray(grad.astype(np.float32), mode="F").save(tmp_path / "f0.tif")
+        expected = np.repeat(expected[..., None], 3, axis=2)
+        name = "f0.tif"
+    write_flo(tmp_path / "est.flo", uniform(h, w, 1.0, 0.0))
+    out = tmp_path / "f.html"
+    rc, _, err = run(capsys, "report", tmp_path / "est.flo", "--frames", tmp_path / name,
+                     "-o", out)
+    assert rc == 0, err
+    text, doc = parse(out)
+    frame, flow = doc.role("frame0")[0], doc.role("flow")[0]
+    assert frame["_row"] == flow["_row"] and not doc.role("warped") and not doc.role("frame1")
+    shown = decode(frame)
+    assert shown.shape == decode(flow).shape == (240, 640, 3)  # 2 images: 640 px each
+    assert (frame["width"], frame["height"]) == (flow["width"], flow["height"]) == ("640", "240")
+    small = np.asarray(Image.fromarray(expected.astype(np.uint8)).resize(
+        (640, 240), Image.Resampling.BOX)).astype(int)
+    assert np.abs(shown.astype(int) - small).max() <= 2
+    assert "800×300 px shown at 640×240" in text
+
+
 def test_trajectory_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     traj, vis = make_trajectories(n_frames=9, ref=4)
     traj *= 0.25  # short tracks: the frame shows between them
@@ -529,7 +745,9 @@ def test_trajectory_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
         ("bad_output", "must end in .html"),
         ("output_dir_missing", "directory does not exist"),
         ("max_frames", "--max-frames"),
-        ("frames_with_flow", "--frames: only for a single trajectory file"),
+        ("frames_with_batch", "--frames: only for a single flow or trajectory file"),
+        ("frames_unreadable", "--frames: "),
+        ("frames_three", "--frames: a flow takes its two input frames"),
     ],
 )
 def test_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str,
@@ -548,7 +766,9 @@ def test_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str,
         "bad_output": [flo, "-o", tmp_path / "r.txt"],
         "output_dir_missing": [flo, "-o", tmp_path / "no" / "r.html"],
         "max_frames": [flo, "-o", out, "--max-frames", "0"],
-        "frames_with_flow": [flo, "-o", out, "--frames", flo],
+        "frames_with_batch": [tmp_path / "empty", "-o", out, "--frames", flo],
+        "frames_unreadable": [flo, "-o", out, "--frames", flo],
+        "frames_three": [flo, "-o", out, "--frames", flo, flo, flo],
     }[case]
     (tmp_path / "a.txt").write_text("hello")
     (tmp_path / "empty").mkdir()
@@ -563,6 +783,28 @@ def test_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str,
     assert message in lines[0]
     assert not out.exists() and not (tmp_path / "r.txt").exists()
     assert not list(tmp_path.glob(".r.html.*"))  # no temporary file left
+
+
+def test_flow_frames_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A frame of another size than the flow, and two frames for a trajectory file."""
+    write_flo(tmp_path / "f.flo", uniform(30, 40, 1.0, 0.0))
+    write_image(tmp_path / "ok.png", np.zeros((30, 40), np.uint8))
+    write_image(tmp_path / "small.png", np.zeros((20, 40, 3), np.uint8))
+    out = tmp_path / "r.html"
+    rc, _, err = run(capsys, "report", tmp_path / "f.flo", "--frames", tmp_path / "ok.png",
+                     tmp_path / "small.png", "-o", out)
+    assert rc == 2 and not out.exists()
+    assert err.strip() == (f"varflow: error: --frames: {tmp_path / 'small.png'} is 40×20 px, "
+                           f"the flow is 40×30 px")
+    traj, vis = make_trajectories()
+    write_trajectories(tmp_path / "t.npz", traj, ref=2, visibility=vis)
+    rc, _, err = run(capsys, "report", tmp_path / "t.npz", "--frames", tmp_path / "ok.png",
+                     tmp_path / "ok.png", "-o", out)
+    assert rc == 2 and not out.exists()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0] == ("varflow: error: --frames: a trajectory file takes one reference frame "
+                        "(an image or a folder of frames), got 2 paths")
 
 
 # --------------------------------------------------------------------------- the browser
@@ -659,21 +901,28 @@ def test_browser_renders_bench_chart(browser: DevTools, tmp_path: Path,
 
 def test_browser_shows_flow_truth_and_error_side_by_side(
         browser: DevTools, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A flow with its ground truth: the estimate, the truth and the error map in one
-    row, their tops level and left to right, not stacked."""
+    """A flow with its ground truth and its input frames: frame 0, frame 1, frame 1
+    warped back, the estimate, the truth and the error map in one row, their tops
+    level, left to right and of one size, not stacked."""
     est = uniform(30, 40, 1.0, 1.5)
     write_flo(tmp_path / "est.flo", est)
     write_flo(tmp_path / "gt.flo", uniform(30, 40, 2.0, 1.5))
+    write_image(tmp_path / "f0.png", np.rint(texture(30, 40)).astype(np.uint8))
+    rgb = np.repeat(np.rint(texture(30, 40, 1.0, 1.5))[..., None], 3, axis=2)
+    write_image(tmp_path / "f1.png", (257 * rgb).astype(np.uint16))  # 16-bit colour
     out = tmp_path / "f.html"
     rc, _, err = run(capsys, "report", tmp_path / "est.flo", "--gt", tmp_path / "gt.flo",
-                     "-o", out)
+                     "--frames", tmp_path / "f0.png", tmp_path / "f1.png", "-o", out)
     assert rc == 0, err
     browser.load(out.as_uri())
     assert browser.problems() == []
     boxes = {b["role"]: b for b in json.loads(browser.evaluate(_IMAGES_JS))}
-    flow, truth, error = boxes["flow"], boxes["gt"], boxes["error"]
-    assert flow["y"] == pytest.approx(truth["y"], abs=1) == pytest.approx(error["y"], abs=1)
-    assert flow["x"] + flow["w"] <= truth["x"] and truth["x"] + truth["w"] <= error["x"]
+    row = [boxes[r] for r in ("frame0", "frame1", "warped", "flow", "gt", "error")]
+    assert all(b["ok"] for b in row)
+    for left, right in zip(row, row[1:], strict=False):
+        assert right["y"] == pytest.approx(left["y"], abs=2), (left["role"], right["role"])
+        assert left["x"] + left["w"] <= right["x"], (left["role"], right["role"])
+        assert (right["w"], right["h"]) == (left["w"], left["h"])
 
 
 def test_browser_detects_console_errors(browser: DevTools, tmp_path: Path) -> None:

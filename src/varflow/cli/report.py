@@ -3,7 +3,11 @@
 Synopsis::
 
     varflow report PATH -o REPORT.html [--gt GT.flo] [--title T] [--max-frames N]
-                   [--frames FRAME]
+                   [--frames FRAME [FRAME]]
+
+``--frames``: for a flow file, its input frames ``FRAME0 [FRAME1]`` (shown in the row
+of the flow; with both, frame 1 warped back by the flow and its photometric error);
+for a trajectory ``.npz``, exactly one reference frame image or folder of frames.
 
 Errors are raised as ``ValueError``/``OSError`` and become one ``varflow: error: ...``
 line.
@@ -63,9 +67,10 @@ def add_parser(sub: Any, common: argparse.ArgumentParser,
         "JavaScript) about PATH: a batch output folder (flows and trajectory windows per "
         "video, parameters from manifest.sqlite, failed tasks), a 'varflow bench --csv' file "
         "(per-sequence tables, per-method summary and bar charts), a .flo / KITTI .png flow "
-        "(with --gt: error map and AEE/AAE/RMS/R1/R3) or a trajectory .npz (trajectory "
-        "plot, displacement and visibility per frame).  Flows of one video share one colour "
-        "scale, stated in pixels.")
+        "(with --gt: error map and AEE/AAE/RMS/R1/R3; with --frames: its input frames in "
+        "the same row) or a trajectory .npz (trajectory plot, displacement and visibility "
+        "per frame).  Flows of one video share one colour scale, stated in pixels; batch "
+        "flows are shown beside the first frame of their pair when the input can be read.")
     p.add_argument("path", metavar="PATH",
                    help="batch output folder, bench .csv, .flo/.png flow or trajectory .npz")
     p.add_argument("-o", "--output", required=True, metavar="REPORT.html",
@@ -74,9 +79,13 @@ def add_parser(sub: Any, common: argparse.ArgumentParser,
     p.add_argument("--title", metavar="T", help="page title (default: from PATH)")
     p.add_argument("--max-frames", type=_positive_int, default=DEFAULT_MAX_FRAMES, metavar="N",
                    help=f"thumbnails per video, evenly spaced (default {DEFAULT_MAX_FRAMES})")
-    p.add_argument("--frames", metavar="FRAME",
-                   help="reference frame image (or folder of frames) to draw the trajectories "
-                   "of a single .npz on (default: the frame named in its metadata, else a "
+    p.add_argument("--frames", metavar="FRAME", nargs="+",
+                   help="for a .flo/.png flow: its input frames FRAME0 [FRAME1] (images of "
+                   "the flow's size), shown side by side with the flow; with both, also "
+                   "frame 1 warped back by the flow and its photometric error (mean |I1(x+w) "
+                   "- I0(x)| on 0-255), a check without ground truth.  For a trajectory "
+                   ".npz: one reference frame image (or folder of frames) to draw the "
+                   "trajectories on (default: the frame named in its metadata, else a "
                    "neutral background)")
     p.set_defaults(func=run)
     return p

@@ -11,7 +11,18 @@ Sizes
     included); trajectory folders show at most ``max(1, max_frames // 4)`` windows,
     each with at most ``max_frames`` frames.  Images are box-filtered down so their
     longer side is at most ``thumb_side`` (thumbnails) or ``large_side`` (single
-    images) pixels; the page states the original and the shown sizes.
+    images) pixels; the page states the original and the shown sizes.  The images of
+    the single-flow row (frames, warped frame, estimate, ground truth, error map)
+    share one size: each longer side is ``ROW_WIDTH // n`` for ``n`` images, kept
+    between ``thumb_side`` and ``large_side``, so that the row stays side by side.
+Input frames
+    A single flow may come with its input frames (``--frames F0 [F1]``): they are shown
+    in the row of the flow, and with both frames, frame 1 warped back by the estimate
+    (bilinear) with its photometric error, the mean absolute difference to frame 0 on
+    0–255 over the pixels whose target lands inside frame 1.  In a batch folder, each
+    flow thumbnail is paired with the thumbnail of the first frame of its pair, read
+    from the input the manifest records (each frame once; a video in one forward
+    pass); when that input is gone the flows are shown alone, with a note.
 """
 
 from __future__ import annotations
@@ -23,7 +34,7 @@ import logging
 import math
 import os
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +44,10 @@ from .figures import (
     downscale,
     error_colorbar,
     error_map,
+    grey_outside,
     neutral_background,
+    to_uint8,
+    unit_rgb_frames,
     visibility_image,
 )
 from .html import Page, bar_chart_svg, esc, key_value_table, table
@@ -57,6 +71,8 @@ DEFAULT_MAX_FRAMES = 12
 #: Longer side of thumbnails and of single images, in pixels.
 THUMB_SIDE = 256
 LARGE_SIDE = 640
+#: Width shared by the images of the single-flow row (see the module notes).
+ROW_WIDTH = 1280
 #: Side of the colour-wheel legend image.
 LEGEND_SIDE = 101
 #: Thumbnails of the frames of trajectory windows in a batch folder.
@@ -65,6 +81,10 @@ WINDOW_THUMB_SIDE = 160
 _MAX_PLOT_VALUES = 8_000_000
 #: Rows shown in the table of failed tasks.
 MAX_FAILED_ROWS = 500
+#: Largest number of bytes of decoded video frames held at once (batch input frames).
+_FRAME_CHUNK_BYTES = 256 * 2**20
+
+PathArg = str | os.PathLike[str]
 
 _KIND_TEXT = {
     "batch": "batch output folder",
@@ -115,6 +135,24 @@ def _flow_stats(flow: np.ndarray) -> tuple[float, float, float]:
     if not known.any():
         return math.nan, math.nan, 100.0
     return float(m[known].mean()), float(m[known].max()), 100.0 * float(1.0 - known.mean())
+
+
+def _reason(exc: BaseException) -> str:
+    """One line about an error (``strerror: filename`` for OS errors)."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        text = f"{exc.strerror}: {exc.filename}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
+
+
+def _frame_paths(frames: PathArg | Sequence[PathArg] | None) -> list[Path]:
+    """``--frames`` as a list of paths (one path alone is a list of one)."""
+    if frames is None:
+        return []
+    if isinstance(frames, str | os.PathLike):
+        return [Path(os.fspath(frames))]
+    return [Path(os.fspath(f)) for f in frames]
 
 
 def _size(shape: Sequence[int]) -> str:
@@ -169,8 +207,69 @@ def _read_chosen(video: Video, chosen: Sequence[int],
     return loaded, problems
 
 
+def _check_frame_range(src: Path, n: int, wanted: Sequence[int], what: str) -> None:
+    if wanted and wanted[-1] >= n:
+        raise ValueError(f"{src} has {n} {what}, the flows need frame {wanted[-1]}")
+
+
+def _iter_input_frames(src: Path, wanted: Sequence[int]) -> Iterator[tuple[int, np.ndarray]]:
+    """``(index, frame)`` for the increasing frame indices ``wanted`` of a batch input.
+
+    A frame folder: its image files in natural order (the batch's numbering), each
+    read once.  A video: :meth:`VideoReader.read_indices` in chunks of at most
+    ``_FRAME_CHUNK_BYTES`` of decoded frames, one forward pass that seeks past the
+    GOPs holding no wanted frame and decodes nothing after the last one.
+    """
+    from ..io import read_image
+    from ..io.video import VideoReader, list_frame_files
+
+    if not src.exists():
+        raise FileNotFoundError(2, "input not found", str(src))
+    if src.is_dir():
+        files = list_frame_files(src)
+        _check_frame_range(src, len(files), wanted, "images")
+        for i in wanted:
+            yield i, read_image(files[i])
+        return
+    with VideoReader(src) as reader:
+        _check_frame_range(src, len(reader), wanted, "frames")
+        info = reader.info
+        frame_bytes = max(1, int(np.prod(info.frame_shape)) * np.dtype(info.dtype).itemsize)
+        chunk = max(1, _FRAME_CHUNK_BYTES // frame_bytes)
+        for k in range(0, len(wanted), chunk):
+            part = list(wanted[k:k + chunk])
+            yield from zip(part, reader.read_indices(part), strict=True)
+
+
+def _input_thumbnails(video: Video, indices: Sequence[int]) -> tuple[dict[int, np.ndarray], str]:
+    """Thumbnails of the input frames ``indices`` of a flow video, and a note line.
+
+    Returns
+    -------
+    thumbs : dict of int to ndarray
+        Frame index -> ``(h, w, 3)`` uint8 thumbnail; empty when the input is not
+        recorded, missing or unreadable (the note then says why).
+    note : str
+    """
+    if video.input is None:
+        why = ("the manifest does not name the input" if video.tasks
+               else "no manifest row names the input of this video")
+        return {}, f"Input frames not shown: {why}."
+    src = Path(video.input)
+    thumbs: dict[int, np.ndarray] = {}
+    try:
+        for i, frame in _iter_input_frames(src, sorted(set(indices))):
+            rgb = unit_rgb_frames([frame], [f"{src.name} frame {i}"])[0]
+            thumbs[i] = downscale(to_uint8(rgb), THUMB_SIDE)
+    except (ValueError, OSError) as exc:
+        logger.info("report: input frames of %s not shown: %s", video.name, exc)
+        return {}, f"Input frames not shown: {_reason(exc)}; the flows are shown alone."
+    return thumbs, f"Beside each flow: the first frame of its pair, from the input {src}."
+
+
 def _flow_thumbnails(page: Page, video: Video, max_frames: int) -> list[str]:
-    """Thumbnails of a flow video; returns problems (unreadable files)."""
+    """Thumbnails of a flow video, each beside its first input frame when the input
+    can be read; returns problems (unreadable flow files)."""
     from ..io import read_flow
     from ..viz.colorwheel import flow_to_color
 
@@ -181,14 +280,23 @@ def _flow_thumbnails(page: Page, video: Video, max_frames: int) -> list[str]:
         return problems
     scale = _max_magnitude([f for _, f in flows])
     shapes = {f.shape[:2] for _, f in flows}
+    first = {i: (video.pairs[i][0] if i < len(video.pairs) and video.pairs[i] is not None
+                 else video.numbers[i]) for i, _ in flows}
+    inputs, input_note = _input_thumbnails(video, list(first.values()))
     thumbs = []
     stats = []
     shown_size = None
     for i, flow in flows:
         img = downscale(flow_to_color(flow, max_radius=scale), THUMB_SIDE)
         shown_size = img.shape[:2]
-        thumbs.append(page.image(img, role="flow", caption=video.labels[i],
-                                 extra={"frame": video.numbers[i], "scale": f"{scale:.6g}"}))
+        fig = page.image(img, role="flow", caption=video.labels[i],
+                         extra={"frame": video.numbers[i], "scale": f"{scale:.6g}"})
+        if first[i] in inputs:  # frame | flow, wrapping together
+            fig = (f'<div class="pair" data-frame="{first[i]}">'
+                   + page.image(inputs[first[i]], role="frame", caption=f"frame {first[i]}",
+                                extra={"frame": first[i]})
+                   + fig + "</div>")
+        thumbs.append(fig)
         stats.append((video.labels[i], *_flow_stats(flow)))
     orig = sorted(shapes)[0]
     sizes = _size_note(orig, shown_size) if len(shapes) == 1 else (
@@ -197,6 +305,7 @@ def _flow_thumbnails(page: Page, video: Video, max_frames: int) -> list[str]:
     page.para(f"Showing {len(flows)} of {len(video.files)} flows, evenly spaced; one colour "
               f"scale for the video: full saturation at {scale:.4g} px (the largest |w| of the "
               f"flows shown); {sizes}.", cls="note scale")
+    page.para(input_note, cls="note frames")
     page.add('<div class="thumbs">' + _legend(page, scale) + "".join(thumbs) + "</div>")
     page.add("<details><summary>magnitudes of the flows shown</summary>")
     page.add(table(("flow", "mean |w| px", "max |w| px", "unknown %"), stats))
@@ -207,14 +316,40 @@ def _flow_thumbnails(page: Page, video: Video, max_frames: int) -> list[str]:
 # --------------------------------------------------------------------------- trajectories
 
 
-def _read_reference(frames: str | os.PathLike[str] | None, ref: int,
+def _read_frame_file(path: Path, shape: tuple[int, int], against: str) -> np.ndarray:
+    """An image given with ``--frames``, checked to be ``shape`` (H, W) like ``against``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If it is a folder, cannot be read as an image or has another size (one line
+        naming ``--frames``, the file and both sizes).
+    """
+    from ..io import read_image
+
+    if not path.exists():
+        raise FileNotFoundError(2, "--frames: image not found", str(path))
+    if path.is_dir():
+        raise ValueError(f"--frames: {path} is a folder; give the image files")
+    try:
+        img = read_image(path)
+    except ValueError as exc:
+        raise ValueError(f"--frames: {_reason(exc)}") from exc
+    if img.shape[:2] != tuple(shape):
+        raise ValueError(f"--frames: {path} is {_size(img.shape)} px, {against} "
+                         f"{'are' if against.endswith('s') else 'is'} {_size(shape)} px")
+    return img
+
+
+def _read_reference(frames: Path | None, ref: int,
                     metadata: dict[str, Any], shape: tuple[int, int]) -> tuple[Any, str]:
     """The reference frame to draw on, and a note saying where it came from."""
     from ..io import read_image
 
-    candidates: list[Path] = []
     if frames is not None:
-        p = Path(os.fspath(frames))
+        p = frames
         if p.is_dir():
             from ..io.video import list_frame_files
 
@@ -222,14 +357,9 @@ def _read_reference(frames: str | os.PathLike[str] | None, ref: int,
             if not 0 <= ref < len(files):
                 raise ValueError(f"--frames: {p} has {len(files)} images, the reference frame "
                                  f"is number {ref}")
-            candidates = [files[ref]]
-        else:
-            candidates = [p]
-        img = read_image(candidates[0])
-        if img.shape[:2] != shape:
-            raise ValueError(f"--frames: {candidates[0]} is {_size(img.shape)} px, the "
-                             f"trajectories are {_size(shape)} px")
-        return img, f"over reference frame {candidates[0].name}"
+            p = files[ref]
+        img = _read_frame_file(p, shape, "the trajectories")
+        return img, f"over reference frame {p.name}"
     listed = metadata.get("frames")
     if isinstance(listed, list) and len(listed) > ref and all(isinstance(f, str) for f in listed):
         p = Path(listed[ref]) if len(listed) > 1 else None
@@ -575,48 +705,125 @@ def _bench(page: Page, src: BenchTable) -> None:
 # --------------------------------------------------------------------------- single files
 
 
-def _single_flow(page: Page, path: Path, gt_path: str | os.PathLike[str] | None) -> None:
+def _row_side(n_images: int) -> int:
+    """Longer side of each of the ``n_images`` images of the single-flow row."""
+    return max(THUMB_SIDE, min(LARGE_SIDE, ROW_WIDTH // max(1, n_images)))
+
+
+def _photometric(frame0: np.ndarray, frame1: np.ndarray,
+                 flow: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Frame 1 warped back by the flow, where it lands inside, and the photometric error.
+
+    Parameters
+    ----------
+    frame0, frame1 : ndarray, shape (H, W, 3), float in [0, 1]
+    flow : ndarray, shape (H, W, 2)
+        From frame 0 to frame 1.
+
+    Returns
+    -------
+    warped : ndarray, shape (H, W, 3), float32
+        ``frame1(x + w(x))``, bilinear (:func:`varflow.ops.warp.warp_bilinear`).
+    inside : ndarray, shape (H, W), bool
+        Where ``x + w(x)`` is known and inside frame 1.
+    error : float
+        Mean absolute difference between ``warped`` and ``frame0`` over ``inside``
+        (and the channels), on 0–255; NaN when no pixel lands inside.
+    """
+    from ..ops.warp import warp_bilinear
+
+    known = np.isfinite(flow).all(axis=2) & (np.abs(flow) <= 1e9).all(axis=2)
+    uv = np.where(known[..., None], flow, 0.0).astype(np.float32)
+    warped, inside = warp_bilinear(frame1, uv)
+    inside &= known
+    if not inside.any():
+        return warped, inside, math.nan
+    diff = np.abs(warped[inside].astype(np.float64) - frame0[inside])
+    return warped, inside, 255.0 * float(diff.mean())
+
+
+def _single_flow(page: Page, path: Path, gt_path: PathArg | None,
+                 frame_paths: Sequence[Path] = ()) -> None:
     from ..evaluation.metrics import endpoint_error_map, evaluate
     from ..io import read_flow
     from ..viz.colorwheel import flow_to_color
 
     flow = read_flow(path)
+    shape = flow.shape[:2]
     gt = None
     if gt_path is not None:
         gt = read_flow(gt_path)
         if gt.shape != flow.shape:
             raise ValueError(f"--gt: {gt_path} is {_size(gt.shape)} px, the flow is "
                              f"{_size(flow.shape)} px")
+    raw = [_read_frame_file(p, shape, "the flow") for p in frame_paths]
+    try:
+        frames = unit_rgb_frames(raw, [f"--frames: {p}" for p in frame_paths])
+    except ValueError as exc:
+        raise ValueError(_reason(exc)) from exc
+    del raw
+    # one row: frame 0, frame 1, frame 1 warped back, estimate, ground truth, error map
+    n_row = len(frames) + (len(frames) == 2) + 1 + (2 if gt is not None else 0)
+    side = _row_side(n_row)
     scale = _max_magnitude([gt if gt is not None else flow])
-    img = downscale(flow_to_color(flow, max_radius=scale), LARGE_SIDE)
+    img = downscale(flow_to_color(flow, max_radius=scale), side)
     mean, top, unknown = _flow_stats(flow)
     which = "ground truth" if gt is not None else "flow"
     page.para(f"One colour scale: full saturation at {scale:.4g} px (the largest |w| of the "
               f"{which}); {_size_note(flow.shape, img.shape)}.", cls="note scale")
-    figs = [page.image(img, role="flow", caption=f"estimate {path.name}",
-                       extra={"scale": f"{scale:.6g}"})]
+    figs = []
+    for k, (p, frame) in enumerate(zip(frame_paths, frames, strict=True)):
+        figs.append(page.image(downscale(to_uint8(frame), side), role=f"frame{k}",
+                               caption=f"frame {k}: {p.name}"))
+    if len(frames) == 2:
+        warped, inside, photo = _photometric(frames[0], frames[1], flow)
+        share = 100.0 * float(inside.mean())
+        wimg = downscale(grey_outside(to_uint8(warped), inside), side)
+        err_text = f"{photo:.2f}" if math.isfinite(photo) else "n/a"
+        figs.append(page.image(
+            wimg, role="warped",
+            caption=f"frame 1 warped back by the estimate; photometric error {err_text} "
+                    f"(mean |difference| to frame 0 on 0–255) over the {share:.1f} % of "
+                    f"pixels that land inside",
+            extra={"photometric": f"{photo:.6g}", "inside": f"{share / 100.0:.6g}"}))
+        del warped
+    figs.append(page.image(img, role="flow", caption=f"estimate {path.name}",
+                           extra={"scale": f"{scale:.6g}"}))
     if gt is not None:
-        gimg = downscale(flow_to_color(gt, max_radius=scale), LARGE_SIDE)
+        gimg = downscale(flow_to_color(gt, max_radius=scale), side)
         figs.append(page.image(gimg, role="gt", caption=f"ground truth {Path(gt_path).name}",
                                extra={"scale": f"{scale:.6g}"}))
     figs.append(_legend(page, scale))
+    vmax = 1.0
+    if gt is not None:
+        epe = endpoint_error_map(flow, gt)
+        known = epe[np.isfinite(epe)]
+        vmax = max(1.0, float(np.percentile(known, 99))) if known.size else 1.0
+        emap = downscale(error_map(epe, vmax), side)
+        bar = error_colorbar(256, 14)
+        figs += [page.image(emap, role="error", caption="endpoint error",
+                            extra={"vmax": f"{vmax:.6g}"}),
+                 page.image(bar, role="colorbar", caption=f"0 px … {vmax:.3g} px",
+                            extra={"vmax": f"{vmax:.6g}"})]
+    # everything side by side, in one row
+    page.add('<div class="thumbs row">' + "".join(figs) + "</div>")
+    if frames:
+        text = (f"Input frames {', '.join(p.name for p in frame_paths)} at the size of the "
+                f"flow images")
+        if len(frames) == 2:
+            text += ("; frame 1 warped back by the estimate (bilinear) should look like frame "
+                     "0 where the flow is right: its photometric error is the mean absolute "
+                     "difference to frame 0 on 0–255 over the pixels whose target lands "
+                     "inside frame 1 (grey: outside or no estimate), a check that needs no "
+                     "ground truth")
+        else:
+            text += " (--frames F0 F1 adds frame 1 warped back by the estimate)"
+        page.para(text + ".", cls="note frames")
     if gt is None:
-        page.add('<div class="thumbs">' + "".join(figs) + "</div>")
         page.add(table(("size", "mean |w| px", "max |w| px", "unknown %"),
                        [(_size(flow.shape), mean, top, unknown)], cls="stats"))
         page.para("No ground truth given (--gt GT.flo adds the error map and AEE/AAE/RMS/R1/R3).")
         return
-    # the estimate, the ground truth and the error map side by side, in one row
-    epe = endpoint_error_map(flow, gt)
-    known = epe[np.isfinite(epe)]
-    vmax = max(1.0, float(np.percentile(known, 99))) if known.size else 1.0
-    emap = downscale(error_map(epe, vmax), LARGE_SIDE)
-    bar = error_colorbar(256, 14)
-    figs += [page.image(emap, role="error", caption="endpoint error",
-                        extra={"vmax": f"{vmax:.6g}"}),
-             page.image(bar, role="colorbar", caption=f"0 px … {vmax:.3g} px",
-                        extra={"vmax": f"{vmax:.6g}"})]
-    page.add('<div class="thumbs">' + "".join(figs) + "</div>")
     page.para(f"Endpoint error map: dark blue 0 px to yellow {vmax:.3g} px (the 99th "
               f"percentile, at least 1 px; larger errors clipped); grey: no ground truth or "
               f"estimate; {_size_note(flow.shape, emap.shape)}.")
@@ -632,7 +839,7 @@ def _single_flow(page: Page, path: Path, gt_path: str | os.PathLike[str] | None)
                    cls="metrics"))
 
 
-def _single_trajectories(page: Page, path: Path, frames: str | os.PathLike[str] | None,
+def _single_trajectories(page: Page, path: Path, frames: Path | None,
                          max_frames: int) -> None:
     from ..io.trajectories import read_trajectories
 
@@ -667,7 +874,7 @@ def render_report(
     gt: str | os.PathLike[str] | None = None,
     title: str | None = None,
     max_frames: int = DEFAULT_MAX_FRAMES,
-    frames: str | os.PathLike[str] | None = None,
+    frames: PathArg | Sequence[PathArg] | None = None,
 ) -> tuple[str, ReportInfo]:
     """Build the HTML report of a batch folder, bench CSV, flow or trajectory file.
 
@@ -681,8 +888,11 @@ def render_report(
         Page title (default: ``"varflow report: <name>"``).
     max_frames : int
         Thumbnails per video, ``>= 1``.
-    frames : str or path-like, optional
-        Reference frame (an image, or a folder of frames) for a single trajectory file.
+    frames : str, path-like or sequence of them, optional
+        For a single flow file: its input frames, frame 0 and optionally frame 1
+        (images of the flow's size), shown in the row of the flow; with both, frame 1
+        warped back by the flow and its photometric error.  For a single trajectory
+        file: exactly one reference frame (an image, or a folder of frames).
 
     Returns
     -------
@@ -703,18 +913,25 @@ def render_report(
     kind = detect_kind(src)
     if gt is not None and kind != "flow":
         raise ValueError(f"--gt: only for a single flow file, not a {_KIND_TEXT[kind]}")
-    if frames is not None and kind != "trajectories":
-        raise ValueError(f"--frames: only for a single trajectory file, not a "
+    frame_paths = _frame_paths(frames)
+    if frame_paths and kind not in ("flow", "trajectories"):
+        raise ValueError(f"--frames: only for a single flow or trajectory file, not a "
                          f"{_KIND_TEXT[kind]}")
+    if kind == "trajectories" and len(frame_paths) > 1:
+        raise ValueError(f"--frames: a trajectory file takes one reference frame (an image or "
+                         f"a folder of frames), got {len(frame_paths)} paths")
+    if kind == "flow" and len(frame_paths) > 2:
+        raise ValueError(f"--frames: a flow takes its two input frames (frame 0 [frame 1]), "
+                         f"got {len(frame_paths)} paths")
     page = Page(title or f"varflow report: {src.resolve().name or src}")
     if kind == "batch":
         _batch(page, load_batch(src), max_frames)
     elif kind == "bench":
         _bench(page, load_bench_csv(src))
     elif kind == "flow":
-        _single_flow(page, src, gt)
+        _single_flow(page, src, gt, frame_paths)
     else:
-        _single_trajectories(page, src, frames, max_frames)
+        _single_trajectories(page, src, frame_paths[0] if frame_paths else None, max_frames)
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     header = [
         f"varflow {__version__} · generated {now}",
@@ -726,6 +943,8 @@ def render_report(
                       f"{LARGE_SIDE} px, up to {max_frames} frames per video")
     if gt is not None:
         header.insert(2, f"ground truth: {Path(os.fspath(gt)).resolve()}")
+    if frame_paths:
+        header.insert(2, "frames: " + ", ".join(str(p.resolve()) for p in frame_paths))
     text = page.render(header)
     info = ReportInfo(kind, page.n_images, len(text.encode("utf-8")), src)
     return text, info
@@ -738,7 +957,7 @@ def build_report(
     gt: str | os.PathLike[str] | None = None,
     title: str | None = None,
     max_frames: int = DEFAULT_MAX_FRAMES,
-    frames: str | os.PathLike[str] | None = None,
+    frames: PathArg | Sequence[PathArg] | None = None,
 ) -> ReportInfo:
     """Write the self-contained HTML report of ``path`` to ``output`` atomically.
 

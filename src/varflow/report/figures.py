@@ -1,8 +1,10 @@
-"""Images of the report: downscaling, error and visibility maps, PNG data URIs.
+"""Images of the report: downscaling, frames, error and visibility maps, PNG data URIs.
 
 All images are ``(H, W, 3)`` uint8 RGB arrays until :func:`png_data_uri` encodes
-them.  Downscaling uses Pillow's box filter (the mean over each source area), so a
-region of one colour keeps that exact colour.
+them; input frames (grey or colour, ``uint8``, ``uint16`` or float) are brought to
+that form by :func:`unit_rgb_frames` and :func:`to_uint8`.  Downscaling uses
+Pillow's box filter (the mean over each source area), so a region of one colour keeps
+that exact colour.
 """
 
 from __future__ import annotations
@@ -10,12 +12,16 @@ from __future__ import annotations
 import base64
 import io
 import logging
+from collections.abc import Sequence
 
 import numpy as np
 from PIL import Image
 
 __all__ = [
     "downscale",
+    "unit_rgb_frames",
+    "to_uint8",
+    "grey_outside",
     "png_bytes",
     "png_data_uri",
     "error_map",
@@ -62,6 +68,50 @@ def downscale(image: np.ndarray, max_side: int) -> np.ndarray:
     size = (max(1, round(w * f)), max(1, round(h * f)))
     out = Image.fromarray(np.ascontiguousarray(image)).resize(size, Image.Resampling.BOX)
     return np.asarray(out, dtype=np.uint8)
+
+
+def unit_rgb_frames(frames: Sequence[np.ndarray], names: Sequence[str]) -> list[np.ndarray]:
+    """Frames as float RGB in ``[0, 1]``, by varflow's intensity convention.
+
+    ``uint8`` / ``uint16`` frames are divided by 255 / 65535; float frames already in
+    ``[0, 1]`` are kept, others are scaled *jointly* from their common range (the
+    rule of :mod:`varflow._validate`, so the frames of one pair stay comparable).
+    Grey frames are repeated into three channels.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray, each (H, W) or (H, W, C)
+    names : sequence of str
+        One per frame, for error messages.
+
+    Returns
+    -------
+    list of ndarray, each (H, W, 3) float32
+
+    Raises
+    ------
+    ValueError
+        On an unsupported dtype or shape, or non-finite values (naming the frame).
+    """
+    from .._validate import as_float_frames
+
+    out = []
+    for f in as_float_frames(list(frames), list(names)):
+        rgb = f[..., :3] if f.shape[2] >= 3 else np.repeat(f[..., :1], 3, axis=2)
+        out.append(np.ascontiguousarray(rgb, dtype=np.float32))
+    return out
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """A float image in ``[0, 1]`` as ``uint8`` (rounded, clipped)."""
+    return np.floor(255.0 * np.clip(image, 0.0, 1.0) + 0.5).astype(np.uint8)
+
+
+def grey_outside(image: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """A copy of an RGB uint8 image with :data:`UNKNOWN_GREY` where ``inside`` is False."""
+    out = np.array(image, dtype=np.uint8, copy=True)
+    out[~np.asarray(inside, bool)] = UNKNOWN_GREY
+    return out
 
 
 def png_bytes(image: np.ndarray) -> bytes:

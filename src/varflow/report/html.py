@@ -8,7 +8,10 @@ its display size as ``width``/``height`` (the pixel size, times the smallest int
 that brings the longer side to :data:`MIN_DISPLAY_SIDE` for tiny images, drawn with
 pixelated scaling) and a ``data-role`` naming what it shows
 (``flow``, ``legend``, ``gt``, ``error``, ``colorbar``, ``trajectories``,
-``displacement``, ``visibility``), so the page can be checked by a program.
+``displacement``, ``visibility``; input frames: ``frame0``, ``frame1`` and ``warped``
+beside a single flow, ``frame`` beside a batch flow thumbnail), so the page can be
+checked by a program.  Rows of images are ``<div class="thumbs">`` flex containers
+that wrap; a ``<div class="pair">`` inside one keeps a frame and its flow together.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ td.text, th.text { text-align: left; }
 td.best { font-weight: bold; }
 tr.summary td { border-top: 2px solid #888; }
 .thumbs { display: flex; flex-wrap: wrap; gap: 10px; align-items: flex-start; }
+.pair { display: flex; gap: 4px; align-items: flex-start; }
 figure { margin: 0; display: table; min-width: 72px; }
 figure img, figure svg { display: block; }
 figure img { outline: 1px solid #b0b0b0; image-rendering: pixelated; }

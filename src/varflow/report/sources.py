@@ -92,6 +92,13 @@ class Video:
         Caption of each file (``"frames 3→4"`` from the manifest, else ``"frame 3"``).
     tasks : list of Task
         Manifest rows of this video (empty without a manifest).
+    pairs : list of (int, int) or None
+        Per file, the frames ``(i, j)`` of its flow as the manifest records them
+        (None when the manifest has no row or no frames for the file, and for
+        trajectory windows).
+    input : str or None
+        The input (video file or frame folder) as the manifest records it; None
+        without a manifest.
     """
 
     name: str
@@ -100,6 +107,8 @@ class Video:
     numbers: list[int] = dataclasses.field(default_factory=list)
     labels: list[str] = dataclasses.field(default_factory=list)
     tasks: list[Task] = dataclasses.field(default_factory=list)
+    pairs: list[tuple[int, int] | None] = dataclasses.field(default_factory=list)
+    input: str | None = None
 
 
 @dataclasses.dataclass
@@ -346,6 +355,7 @@ def load_batch(root: str | os.PathLike[str]) -> BatchFolder:
         video = Video(name=name, kind=kind, tasks=[
             t for t in tasks
             if t.name == name and (t.kind if t.kind in ("flow", "track") else "flow") == kind])
+        video.input = next((t.input for t in video.tasks if t.input), None)
         files: dict[Path, tuple[int, int]] = {}  # path -> (number, second frame or -1)
         for n, second, p in scanned.get(name, {}).get(kind, []):
             files[p.resolve()] = (n, -1 if second is None else second)
@@ -357,6 +367,9 @@ def load_batch(root: str | os.PathLike[str]) -> BatchFolder:
         for p, (n, second) in sorted(files.items(), key=lambda item: (item[1], str(item[0]))):
             video.files.append(p)
             video.numbers.append(n)
+            task = by_output.get(p)
+            video.pairs.append((task.frames[0], task.frames[1]) if kind == "flow" and task
+                               is not None and task.frames and len(task.frames) >= 2 else None)
             video.labels.append(_frames_label(kind, n, None if second < 0 else second,
                                               by_output.get(p)))
         videos.append(video)
