@@ -3,10 +3,15 @@
     python benchmarks/tables.py interpolation [benchmarks/results/interpolation.csv]
 
 prints the frame-interpolation tables (reporting split, tuning split, seconds per
-960×540 frame) from the CSV of ``varflow bench interpolation --split all --csv ...``.
-benchmarks/README.md holds this output between the markers
-``<!-- generated: interpolation -->`` and ``<!-- end generated -->``, and
-tests/test_benchmark_tables.py checks that it is what this script prints now.
+960×540 frame) from the CSV of ``varflow bench interpolation --split all --csv ...``;
+
+    python benchmarks/tables.py twoframe [benchmarks/results/twoframe_middlebury.csv]
+
+prints the table of every two-frame method and peer on Middlebury from the CSV of
+``varflow bench twoframe --sets middlebury ... --csv ...``.  benchmarks/README.md holds
+each output between the markers ``<!-- generated: AREA -->`` and
+``<!-- end generated -->``, and tests/test_benchmark_tables.py checks that it is what
+this script prints now.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_CSV = HERE / "results" / "interpolation.csv"
+TWOFRAME_CSV = HERE / "results" / "twoframe_middlebury.csv"
 
 #: Sets, their labels, and the methods of the tables in order.
 SETS = (("middlebury", "Middlebury"), ("ucf101", "UCF101"), ("sintel", "Sintel alley_1"))
@@ -111,12 +117,45 @@ def interpolation(path: Path = DEFAULT_CSV) -> str:
         timing_table(rows)])
 
 
+#: Rows of the two-frame table: CSV method name and label, in order.
+TWOFRAME_ROWS = (("tvl1", "`tvl1`"), ("tvl1-fast", "`tvl1-fast`"), ("tvl1-ld", "`tvl1-ld`"),
+                 ("tvl1-tensor", "`tvl1-tensor`"), ("tensor", "`tensor` (the book's plain energy)"),
+                 ("deepflow", "OpenCV DeepFlow"), ("dis", "OpenCV DIS"),
+                 ("dualtvl1", "OpenCV DualTVL1"),
+                 ("skimage", "scikit-image `optical_flow_tvl1`"))
+
+
+def twoframe(path: Path = TWOFRAME_CSV) -> str:
+    """The generated table of every two-frame method and peer on Middlebury: mean AEE,
+    mean seconds per pair and the ratio of the total time to DeepFlow's; the lowest
+    AEE in bold."""
+    rows = [r for r in read_rows(path) if r["set"] == "middlebury"]
+    by: dict[str, list[dict[str, str]]] = {}
+    for r in rows:
+        by.setdefault(r["method"], []).append(r)
+    present = [(m, lab) for m, lab in TWOFRAME_ROWS if m in by]
+    aee = {m: statistics.mean(float(r["aee"]) for r in by[m]) for m, _ in present}
+    secs = {m: statistics.mean(float(r["seconds"]) for r in by[m]) for m, _ in present}
+    best = min(aee.values())
+    lines = ["| method | mean AEE | s per pair | × DeepFlow's time |", "|---|---:|---:|---:|"]
+    for m, lab in present:
+        a = f"{aee[m]:.3f}"
+        if a == f"{best:.3f}":
+            a = f"**{a}**"
+        ratio = f"{secs[m] / secs['deepflow']:.2f}" if "deepflow" in secs else "-"
+        lines.append(f"| {lab} | {a} | {secs[m]:.3f} | {ratio} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("area", choices=["interpolation"])
-    parser.add_argument("csv", nargs="?", type=Path, default=DEFAULT_CSV)
+    parser.add_argument("area", choices=["interpolation", "twoframe"])
+    parser.add_argument("csv", nargs="?", type=Path, default=None)
     args = parser.parse_args(argv)
-    print(interpolation(args.csv))
+    if args.area == "twoframe":
+        print(twoframe(args.csv or TWOFRAME_CSV))
+    else:
+        print(interpolation(args.csv or DEFAULT_CSV))
     return 0
 
 

@@ -31,6 +31,15 @@ def test_interpolation_tables_are_generated_from_the_csv() -> None:
     assert blocks["interpolation"] == _tables().interpolation()
 
 
+def test_twoframe_table_is_generated_from_the_csv() -> None:
+    text = (ROOT / "benchmarks" / "README.md").read_text(encoding="utf-8")
+    block = generated_blocks(text).get("twoframe")
+    assert block == _tables().twoframe()
+    # the bold AEE is the lowest, and DeepFlow's time ratio is 1
+    assert "| OpenCV DeepFlow | 0.295 | 0.357 | 1.00 |" in block
+    assert block.count("**") == 2
+
+
 def test_the_readme_quotes_the_interpolation_table() -> None:
     """The landing page's interpolation figures are those of the generated table."""
     tables = _tables()
