@@ -58,6 +58,7 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
+from .._errors import error_line
 from .inputs import BatchInput, InputProbe, probe_input
 from .manifest import INPUT_TASK, MANIFEST_NAME, Manifest
 from .plan import BatchConfig, Task, plan_tasks
@@ -211,7 +212,7 @@ def _plan(inputs: Sequence[BatchInput], config: BatchConfig, manifest: Manifest,
             probe = probe_input(inp)
             tasks = plan_tasks(inp.name, probe.n_frames, config)
         except Exception as exc:  # noqa: BLE001 - any unreadable input is recorded, not fatal
-            error = _error_text(exc)
+            error = error_line(exc)
             log.warning("input %s failed: %s", inp.path, error)
             manifest.fail_input(inp.name, str(inp.path), inp.kind, config.kind, config.method,
                                 params, version, error)
@@ -238,14 +239,6 @@ def _plan(inputs: Sequence[BatchInput], config: BatchConfig, manifest: Manifest,
         manifest.add_tasks(tasks, str(inp.path), config.kind, config.method, params, version)
         planned.append(_Planned(inp, probe, tasks))
     return planned
-
-
-def _error_text(exc: BaseException) -> str:
-    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
-        msg = f"{exc.strerror}: {exc.filename}"
-    else:
-        msg = str(exc) or type(exc).__name__
-    return " ".join(msg.split())
 
 
 def _triage(planned: list[_Planned], manifest: Manifest, out: Path, summary: BatchSummary,
@@ -299,7 +292,7 @@ def _sink_write(sink: Any, task: Task, manifest: Manifest, summary: BatchSummary
     try:
         sink.write(task)
     except (ValueError, OSError) as exc:
-        error = f"zarr: {_error_text(exc)}"
+        error = f"zarr: {error_line(exc)}"
         manifest.finish(task.task_id, "failed", error=error)
         summary.failed += 1
         summary.failures.append((task.task_id, error))
@@ -410,7 +403,7 @@ def _compute(to_run: list[tuple[_Planned, Task]], config: BatchConfig, out: Path
                 result = fut.result()
             except Exception as exc:  # noqa: BLE001 - worker died, cancelled, ...
                 result = {"task_id": task.task_id, "error": f"{type(exc).__name__}: "
-                          f"{_error_text(exc)}"}
+                          f"{error_line(exc)}"}
             fut.release()
             error = result.get("error")
             if error is None:

@@ -27,6 +27,8 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from .._errors import error_line
+
 __all__ = ["PinThreads", "WorkItem", "run_item", "sha256_file", "thread_environment"]
 
 log = logging.getLogger(__name__)
@@ -203,14 +205,6 @@ def _compute(item: WorkItem) -> None:
     write_trajectories(out, traj, ref=ref, visibility=visible, metadata=meta)
 
 
-def _one_line(exc: BaseException) -> str:
-    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
-        msg = f"{exc.strerror}: {exc.filename}"
-    else:
-        msg = str(exc) or type(exc).__name__
-    return " ".join(f"{type(exc).__name__}: {msg}".split())
-
-
 def run_item(item: WorkItem) -> dict[str, Any]:
     """Run one task on a worker.
 
@@ -232,6 +226,6 @@ def run_item(item: WorkItem) -> dict[str, Any]:
         checksum = sha256_file(item.output)
     except Exception as exc:  # noqa: BLE001 - reported to the driver, recorded as failed
         log.debug("task %s failed", item.task_id, exc_info=exc)
-        return {"task_id": item.task_id, "error": _one_line(exc)}
+        return {"task_id": item.task_id, "error": error_line(exc, with_type=True)}
     return {"task_id": item.task_id, "checksum": checksum,
             "seconds": time.perf_counter() - t0}

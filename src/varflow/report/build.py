@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from .._errors import error_line
 from .figures import (
     downscale,
     error_colorbar,
@@ -135,15 +136,6 @@ def _flow_stats(flow: np.ndarray) -> tuple[float, float, float]:
     if not known.any():
         return math.nan, math.nan, 100.0
     return float(m[known].mean()), float(m[known].max()), 100.0 * float(1.0 - known.mean())
-
-
-def _reason(exc: BaseException) -> str:
-    """One line about an error (``strerror: filename`` for OS errors)."""
-    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
-        text = f"{exc.strerror}: {exc.filename}"
-    else:
-        text = str(exc) or type(exc).__name__
-    return " ".join(text.split())
 
 
 def _frame_paths(frames: PathArg | Sequence[PathArg] | None) -> list[Path]:
@@ -263,7 +255,7 @@ def _input_thumbnails(video: Video, indices: Sequence[int]) -> tuple[dict[int, n
             thumbs[i] = downscale(to_uint8(rgb), THUMB_SIDE)
     except (ValueError, OSError) as exc:
         logger.info("report: input frames of %s not shown: %s", video.name, exc)
-        return {}, f"Input frames not shown: {_reason(exc)}; the flows are shown alone."
+        return {}, f"Input frames not shown: {error_line(exc)}; the flows are shown alone."
     return thumbs, f"Beside each flow: the first frame of its pair, from the input {src}."
 
 
@@ -336,7 +328,7 @@ def _read_frame_file(path: Path, shape: tuple[int, int], against: str) -> np.nda
     try:
         img = read_image(path)
     except ValueError as exc:
-        raise ValueError(f"--frames: {_reason(exc)}") from exc
+        raise ValueError(f"--frames: {error_line(exc)}") from exc
     if img.shape[:2] != tuple(shape):
         raise ValueError(f"--frames: {path} is {_size(img.shape)} px, {against} "
                          f"{'are' if against.endswith('s') else 'is'} {_size(shape)} px")
@@ -760,7 +752,7 @@ def _single_flow(page: Page, path: Path, gt_path: PathArg | None,
     try:
         frames = unit_rgb_frames(raw, [f"--frames: {p}" for p in frame_paths])
     except ValueError as exc:
-        raise ValueError(_reason(exc)) from exc
+        raise ValueError(error_line(exc)) from exc
     del raw
     # one row: frame 0, frame 1, frame 1 warped back, estimate, ground truth, error map
     n_row = len(frames) + (len(frames) == 2) + 1 + (2 if gt is not None else 0)
