@@ -67,7 +67,7 @@ import time
 
 import numpy as np
 
-from ..ops.fusion import census_planes, fuse, repair, repair_margin, support_weights
+from ..ops.fusion import census_planes, fuse, repair_with, support_weights
 from ..ops.pyramid import pyramid_shapes
 from ..twoframe.coarse_to_fine import (
     coarse_to_fine_pyramids,
@@ -128,6 +128,7 @@ def propagate_trajectories(
     cost: str = "census",
     repair_distances: tuple[int, ...] = (2, 4, 8),
     repair_adjacent: bool = True,
+    repair_cost: str = "colour",
     support_radius: int = 2,
     support_gamma: float = 0.1,
     callback: TrackCallback | None = None,
@@ -165,6 +166,10 @@ def propagate_trajectories(
         object edges, and on real footage the photometric cost of the repair is
         less reliable than the flow (see
         :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_adjacent`).
+    repair_cost : {"colour", "relit", "census"}
+        Residual of the repair's cost (:func:`varflow.ops.fusion.repair_with`): the
+        frames' colours, the colours with the reference relit to the other frame's
+        light, or their soft census planes.
     support_radius, support_gamma : int, float
         Window radius R and colour scale γ of the photometric cost
         (:func:`varflow.ops.fusion.support_weights` of the reference frame).
@@ -184,6 +189,9 @@ def propagate_trajectories(
     """
     if cost not in ("census", "colour"):
         raise ValueError(f"cost: must be 'census' or 'colour', got {cost!r}")
+    if repair_cost not in ("colour", "relit", "census"):
+        raise ValueError(f"repair_cost: must be 'colour', 'relit' or 'census', "
+                         f"got {repair_cost!r}")
     t0 = time.perf_counter()
     n_frames, height, width = frames.shape[:3]
     pyrs = frame_pyramids(frames, params) if pyramids is None else pyramids
@@ -223,8 +231,8 @@ def propagate_trajectories(
             flow = cands[0]
         if repair_distances and (repair_adjacent or abs(n - ref) > 1):
             rs: dict = {}
-            flow = repair(frames[ref], frames[n], flow, weights, repair_distances, stats=rs,
-                          margin=repair_margin(frames[ref], frames[n]))
+            flow = repair_with(repair_cost, frames[ref], frames[n], flow, weights,
+                               repair_distances, stats=rs)
             repaired.append(rs["changed"])
         traj[n] = flow
         if callback is not None:

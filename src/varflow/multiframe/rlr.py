@@ -124,8 +124,7 @@ from ..ops.fusion import (
     census_planes,
     fuse,
     noise_sigma,
-    repair,
-    repair_margin,
+    repair_with,
     support_weights,
 )
 from ..ops.primal_dual import (
@@ -326,6 +325,14 @@ class MultiFrameParams(FlowTrackParams):
         with this repair (measured while ``adjacent_link_factor`` still spared the
         hidden entries; the two-frame flow: 0.329; at r = 10 0.311 against 0.359).
         Default False.
+    repair_cost : {"colour", "relit", "census"}
+        The residual that the propagation's repair and the final repair compare
+        (:func:`varflow.ops.fusion.repair_with`): the frames' colours; the colours
+        with the reference under the other frame's light, fitted along the flow
+        (a gain that varies linearly across the frame and an offset,
+        :func:`varflow.ops.fusion.relight`); or their soft census planes, which a
+        change of light leaves alone but which also drop the colours.  Default
+        "colour".
     hidden_data_weight : float
         Factor of the data term of the entries marked hidden, in [0, 1]: 0 switches
         it off, 1 keeps it (the visibility then only steers the coupling: the
@@ -352,6 +359,7 @@ class MultiFrameParams(FlowTrackParams):
     visibility_warps: int = 2
     final_repair: bool = True
     repair_adjacent: bool = False
+    repair_cost: str = "colour"
     hidden_data_weight: float = 0.0
 
     @classmethod
@@ -395,6 +403,8 @@ class MultiFrameParams(FlowTrackParams):
                f"must be >= 0, got {self.ustep_tolerance}")
         _check(self.propagate_levels >= 1, "propagate_levels",
                f"must be >= 1, got {self.propagate_levels}")
+        _check(self.repair_cost in ("colour", "relit", "census"), "repair_cost",
+               f"must be 'colour', 'relit' or 'census', got {self.repair_cost!r}")
         _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
                f"must be in [0, 1], got {self.hidden_data_weight}")
         _check(self.visibility_levels >= 1, "visibility_levels",
@@ -1291,6 +1301,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
     if params.init == "propagate":
         return propagate_trajectories(frames, ref, params.flow_params, pyramids,
                                       repair_adjacent=params.repair_adjacent,
+                                      repair_cost=params.repair_cost,
                                       levels=params.propagate_levels,
                                       direct=params.propagate_direct,
                                       matching=params.propagate_matching, callback=callback)
@@ -1640,8 +1651,8 @@ def refine_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
         for n in others:
             if abs(n - ref) == 1 and not params.repair_adjacent:
                 continue
-            traj[n] = repair(frames[ref], frames[n], traj[n], weights, FINAL_REPAIR_DISTANCES,
-                             margin=repair_margin(frames[ref], frames[n]))
+            traj[n] = repair_with(params.repair_cost, frames[ref], frames[n], traj[n], weights,
+                                  FINAL_REPAIR_DISTANCES)
     if back is not None:
         visible = visibility_from(traj, back, ref, [p[0] for p in pyrs],
                                   params.visibility_params())

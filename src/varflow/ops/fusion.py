@@ -58,6 +58,8 @@ __all__ = [
     "census_planes",
     "candidate_costs",
     "repair",
+    "repair_with",
+    "relight",
     "noise_sigma",
     "noise_sigma_flat",
     "repair_margin",
@@ -458,6 +460,102 @@ def fuse(i0: np.ndarray, i1: np.ndarray, candidates: list[np.ndarray], weights: 
         best_cost = np.where(better, cost, best_cost)
         choice[better] = k
     return best, choice
+
+
+def relight(i0: np.ndarray, i1: np.ndarray, flow: np.ndarray,
+            trim: float = 2.5) -> np.ndarray:
+    """The reference frame under the light of the other frame: a fitted change of light.
+
+    Per channel ``c``, the model ``I1_c(x + w(x)) ≈ (a_c + b_c·x̂ + c_c·ŷ)·I0_c(x) + d_c``
+    (a gain that varies linearly across the frame, ``x̂, ŷ`` in [−1, 1], and an
+    offset) is fitted by least squares to the pixels whose target lies inside
+    ``I1``, then fitted again to those whose residual is within ``trim`` times the
+    median absolute residual, so that occlusions and wrong vectors do not pull the
+    fit.  The result ``(a_c + b_c·x̂ + c_c·ŷ)·I0_c + d_c``, clipped to [0, 1], is what
+    ``I0`` looks like under the light of ``I1``: compared with ``I1`` it gives a
+    colour residual that a slow change of gain, offset or a gain gradient across the
+    frame leaves alone, and with no change of light the fit is the identity up to
+    noise.
+
+    Parameters
+    ----------
+    i0, i1 : ndarray, shape (H, W) or (H, W, C), float32
+        Intensities in [0, 1].
+    flow : ndarray, shape (H, W, 2)
+        From ``i0`` to ``i1`` (NaN = unknown, left out of the fit).
+    trim : float
+        Outlier threshold of the second fit, in median absolute residuals.
+
+    Returns
+    -------
+    ndarray, shape of ``i0``, float32
+    """
+    from .warp import warp_bilinear
+
+    a0 = np.asarray(i0, np.float32)
+    a1 = np.asarray(i1, np.float32)
+    planes0 = a0.reshape(a0.shape[:2] + (-1,))
+    planes1 = a1.reshape(a1.shape[:2] + (-1,))
+    h, w = planes0.shape[:2]
+    fl = np.asarray(flow, np.float32)
+    known = np.isfinite(fl).all(axis=2)
+    warped, inside = warp_bilinear(planes1, np.where(known[..., None], fl, 0.0))
+    use = (inside & known).ravel()
+    if use.sum() < 16:
+        return a0.copy()
+    yy, xx = np.mgrid[0:h, 0:w]
+    xs = (2.0 * xx / max(w - 1, 1) - 1.0).ravel()
+    ys = (2.0 * yy / max(h - 1, 1) - 1.0).ravel()
+    out = np.empty_like(planes0)
+    for c in range(planes0.shape[2]):
+        v0 = planes0[..., c].ravel().astype(np.float64)
+        v1 = warped[..., c].ravel().astype(np.float64)
+        design = np.stack([v0, xs * v0, ys * v0, np.ones_like(v0)], axis=1)
+        keep = use
+        coef = np.array([1.0, 0.0, 0.0, 0.0])
+        for _ in range(2):
+            if keep.sum() < 16:
+                break
+            coef = np.linalg.lstsq(design[keep], v1[keep], rcond=None)[0]
+            res = np.abs(design @ coef - v1)
+            keep = use & (res <= trim * max(float(np.median(res[use])), 1e-6))
+        out[..., c] = np.clip(design @ coef, 0.0, 1.0).reshape(h, w)
+    return out.reshape(a0.shape)
+
+
+def repair_with(cost: str, i0: np.ndarray, i1: np.ndarray, flow: np.ndarray,
+                weights: np.ndarray, distances: tuple[int, ...] = (2, 4, 8),
+                engine: str = "numba", stats: dict | None = None) -> np.ndarray:
+    """:func:`repair` of a flow on the frames' colours, relit colours or census planes.
+
+    Parameters
+    ----------
+    cost : {"colour", "relit", "census"}
+        ``"colour"``: the residual of the colours, truncated at 0.1.  ``"relit"``:
+        the same with the reference frame under the other frame's light
+        (:func:`relight`, fitted along ``flow``): where the light changes, the
+        colour residual of the true vector grows with the change, and a wrong vector
+        that lands on a matching brightness can win.  ``"census"``: the residual of
+        :func:`census_planes` of both frames, truncated at 0.5 (the planes lie in
+        [−½, ½]), blind to the light but also to the colours.
+    i0, i1 : ndarray, shape (H, W[, C]), float32
+        The frames, intensities in [0, 1].
+    flow, weights, distances, engine, stats
+        As in :func:`repair`; the margin is :func:`repair_margin` of the frames.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2), float32
+    """
+    margin = repair_margin(i0, i1)
+    if cost == "census":
+        return repair(census_planes(i0), census_planes(i1), flow, weights, distances,
+                      truncation=0.5, margin=margin, engine=engine, stats=stats)
+    if cost == "relit":
+        i0 = relight(i0, i1, flow)
+    elif cost != "colour":
+        raise ValueError(f"cost: must be 'colour', 'relit' or 'census', got {cost!r}")
+    return repair(i0, i1, flow, weights, distances, margin=margin, engine=engine, stats=stats)
 
 
 #: The 8 neighbours ``(dy, dx)`` of :func:`census_planes`.
