@@ -71,3 +71,16 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
     subprocess.run([sys.executable, "-c", _WARM_UP], check=False, capture_output=True,
                    timeout=1800)
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator:
+    """Headless Chromium driven through the DevTools protocol (tests/_browser.py), one per
+    test module; the test is skipped where Chromium is absent."""
+    from _browser import DevTools, chromium_or_skip
+
+    tools = DevTools(chromium_or_skip(), tmp_path_factory.mktemp("chromium"))
+    try:
+        yield tools
+    finally:
+        tools.close()

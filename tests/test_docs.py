@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _browser import DevTools, chromium_or_skip
+from _browser import DevTools
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,16 +99,6 @@ def test_the_gallery_has_eight_examples_with_a_measured_number() -> None:
 
 
 # --------------------------------------------------------------------------- the site
-
-
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory):
-    exe = chromium_or_skip()
-    tools = DevTools(exe, tmp_path_factory.mktemp("chromium"))
-    try:
-        yield tools
-    finally:
-        tools.close()
 
 
 def _not_blank(shot: np.ndarray) -> None:

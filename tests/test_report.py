@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from _browser import DevTools, chromium_or_skip
+from _browser import DevTools
 from PIL import Image
 
 import varflow
@@ -808,16 +808,6 @@ def test_flow_frames_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 # --------------------------------------------------------------------------- the browser
-
-
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory):
-    exe = chromium_or_skip()
-    tools = DevTools(exe, tmp_path_factory.mktemp("chromium"))
-    try:
-        yield tools
-    finally:
-        tools.close()
 
 
 _IMAGES_JS = """JSON.stringify([...document.images].map(i => {
