@@ -128,7 +128,7 @@ def propagate_trajectories(
     cost: str = "census",
     repair_distances: tuple[int, ...] = (2, 4, 8),
     repair_adjacent: bool = True,
-    repair_cost: str = "colour",
+    repair_cost: str = "relit",
     support_radius: int = 2,
     support_gamma: float = 0.1,
     callback: TrackCallback | None = None,
@@ -169,7 +169,8 @@ def propagate_trajectories(
     repair_cost : {"colour", "relit", "census"}
         Residual of the repair's cost (:func:`varflow.ops.fusion.repair_with`): the
         frames' colours, the colours with the reference relit to the other frame's
-        light, or their soft census planes.
+        light, or their soft census planes.  Default "relit" (see
+        :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_cost`).
     support_radius, support_gamma : int, float
         Window radius R and colour scale γ of the photometric cost
         (:func:`varflow.ops.fusion.support_weights` of the reference frame).
