@@ -86,7 +86,10 @@ Beyond the book (``init``, ``visibility``, ``final_repair``):
 * **L-step sample**: the columns of the l1 filtering's seed are sampled per motion
   cluster (``lowrank_strata``) so that a small moving object has basis vectors.
 * **Final repair**: every frame's field is repaired across motion edges
-  (:func:`varflow.ops.fusion.repair`, margin scaled by the frames' noise).
+  (:func:`varflow.ops.fusion.repair`, margin scaled by the frames' noise).  This
+  repair and the propagation's compare the colours with the reference relit to
+  the other frame's light (``repair_cost``, :func:`varflow.ops.fusion.relight`),
+  so a change of light does not favour a wrong vector of matching brightness.
 
 Each alternation runs the L-step on the current ``U`` first, then the U-step
 linked to that ``L``.
