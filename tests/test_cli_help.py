@@ -155,3 +155,32 @@ def test_methods_params_table_unchanged(capsys: pytest.CaptureFixture[str]) -> N
     for name in (*METHODS, *TRACKERS):
         assert re.search(rf"^{re.escape(name)}\s", out, re.M), name
     assert re.search(r"^\s+n_warps\s+.*\s5\s", out, re.M)  # tensor's row
+
+
+def test_plain_text_drops_the_sphinx_markup() -> None:
+    from varflow.cli._common import plain_text
+
+    text = ("see :func:`~varflow.ops.fusion.repair` and :mod:`varflow.multiframe.propagate`, "
+            ":data:`FINAL_REPAIR_DISTANCES`, :py:attr:`x.y <varflow.x.y>`; ``ref ± 1`` only")
+    assert plain_text(text) == ("see repair and varflow.multiframe.propagate, "
+                                "FINAL_REPAIR_DISTANCES, x.y; ref ± 1 only")
+    assert plain_text(text, markdown=True) == (
+        "see `repair` and `varflow.multiframe.propagate`, `FINAL_REPAIR_DISTANCES`, `x.y`; "
+        "`ref ± 1` only")
+
+
+@pytest.mark.parametrize("argv", [("flow",), ("track",), ("bench", "trajectories")])
+def test_help_has_no_sphinx_markup(capsys: pytest.CaptureFixture[str], argv: tuple) -> None:
+    """The flags' help is read in a terminal: no ``:func:`...``` roles or double backticks."""
+    text = help_text(capsys, *argv)
+    assert not re.search(r":\w+:`|``", text), re.search(r".{40}(:\w+:`|``).{40}", text)
+    if argv[0] == "track":  # a role became its name: (:func:`varflow.ops.fusion.repair`)
+        assert "(varflow.ops.fusion.repair)" in flag_help(text, "--final-repair")
+
+
+def test_methods_params_text_and_markdown_without_roles(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    for argv in (["methods", "--params"], ["methods", "--params", "--markdown"]):
+        assert cli.main(argv) == 0
+        out = capsys.readouterr().out
+        assert not re.search(r":\w+:`", out), argv

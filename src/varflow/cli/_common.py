@@ -114,6 +114,27 @@ def _field_docs(cls: type) -> dict[str, _FieldDoc]:
     return out
 
 
+_ROLE = re.compile(r":(?:\w+:)?\w+:`(~?)([^`<]*?)(?:\s*<[^`]*>)?`")
+_LITERAL = re.compile(r"``([^`]+)``")
+
+
+def plain_text(text: str, markdown: bool = False) -> str:
+    """A docstring fragment without its reStructuredText markup, for the terminal.
+
+    ``:func:`~varflow.ops.fusion.repair``` becomes ``repair`` (the last component,
+    as Sphinx shows ``~``) and ``:mod:`varflow.multiframe.propagate``` its full
+    name; literals lose their double backticks.  With ``markdown`` both become
+    Markdown code spans.
+    """
+    def role(m: re.Match) -> str:
+        target = m.group(2).strip()
+        name = target.rsplit(".", 1)[-1] if m.group(1) else target
+        return f"`{name}`" if markdown else name
+
+    text = _ROLE.sub(role, text)
+    return _LITERAL.sub(r"`\1`" if markdown else r"\1", text)
+
+
 @dataclasses.dataclass
 class _Param:
     name: str
@@ -254,7 +275,7 @@ def _add_param_flags(
                        "NAME before --help for one method's).")
     group = parser.add_argument_group("method parameters", description)
     for p in params.values():
-        meaning = p.doc.meaning if p.doc else ""
+        meaning = plain_text(p.doc.meaning) if p.doc else ""
         sym = f" [{p.doc.symbol}]" if p.doc and p.doc.symbol else ""
         if any(m in p.defaults for m in methods):
             text = f"{meaning}{sym} ({_defaults_text(p, methods, registry)})".replace("%", "%%")
@@ -344,14 +365,14 @@ def parameter_table(method: str, markdown: bool = False) -> str:
         lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]
         for name, sym, default, meaning in rows:
             flag = "--" + name.replace("_", "-")
-            meaning = meaning.replace("|", "\\|")
+            meaning = plain_text(meaning, markdown=True).replace("|", "\\|")
             lines.append(f"| `{name}` (`{flag}`) | {sym or '—'} | `{default}` | {meaning} |")
         return "\n".join(lines)
     wn = max(len(r[0]) for r in rows)
     ws = max(len(r[1]) for r in rows)
     wd = max(len(r[2]) for r in rows)
     return "\n".join(
-        f"  {n:<{wn}}  {s or '-':<{ws}}  {d:>{wd}}  {t}" for n, s, d, t in rows
+        f"  {n:<{wn}}  {s or '-':<{ws}}  {d:>{wd}}  {plain_text(t)}" for n, s, d, t in rows
     )
 
 

@@ -334,14 +334,14 @@ class MultiFrameParams(FlowTrackParams):
         with the reference under the other frame's light, fitted along the flow
         (a gain that varies linearly across the frame and an offset,
         :func:`varflow.ops.fusion.relight`); or their soft census planes, which a
-        change of light leaves alone but which also drop the colours.  Default
-        "relit": under a change of light the colour cost prefers wrong vectors that
-        land on a matching brightness.  Photographic suite, full rlr, mean EPE
-        colour → relit: tuning split 0.5529 → 0.2280 (illumination 1.9649 →
-        0.3272; objects and noise 2 % worse), reporting split 0.6244 → 0.2251
-        (illumination 2.3816 → 0.3866).  Census repairs the light changes as well
+        change of light leaves alone but which also drop the colours.  Under a
+        change of light the colour cost prefers wrong vectors that land on a
+        matching brightness.  Default "relit" (photographic suite, full rlr, mean
+        EPE colour → relit: tuning split 0.5529 → 0.2280, illumination 1.9649 →
+        0.3272, objects and noise 2 % worse; reporting split 0.6244 → 0.2251,
+        illumination 2.3816 → 0.3866; census repaired the light changes as well,
         but its initial trajectories were worse on the tuning split's objects and
-        noise clips (benchmarks/HISTORY.md).
+        noise clips).
     hidden_data_weight : float
         Factor of the data term of the entries marked hidden, in [0, 1]: 0 switches
         it off, 1 keeps it (the visibility then only steers the coupling: the
