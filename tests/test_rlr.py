@@ -433,6 +433,50 @@ def test_fusion_takes_the_decoupled_displacement_where_the_data_say_so():
     np.testing.assert_array_equal(kept, wrong)
     assert none == 0.0
     np.testing.assert_array_equal(out[0], wrong[0])  # the reference is never touched
+    hard, _ = fuse_decoupled(frames, 0, wrong, right, 0.005, softness=0.0)
+    np.testing.assert_array_equal(hard, out)
+    np.testing.assert_array_equal(fuse_decoupled(frames, 0, wrong, right, 0.0, 0.5)[0],
+                                  fuse_decoupled(frames, 0, wrong, right, 0.0)[0])
+
+
+def test_soft_fusion_blends_the_two_refinements_near_the_margin():
+    """The soft fusion is u_c + w (u_d − u_c) with one weight w in [0, 1] per pixel: the
+    better field where the census cost tells them apart (a textured square), and
+    where it cannot (a flat band, equal costs) the logistic's value at a cost
+    advantage of 0, 1 / (1 + exp(1/κ)); a narrow blend tends to the hard choice."""
+    from varflow.generators.pairs import synthetic_pair
+    from varflow.multiframe.rlr import fuse_decoupled
+
+    f0, f1, gt = synthetic_pair("translation", shape=(64, 80), magnitude=2.0, channels=3,
+                                seed=3)
+    f0, f1 = f0.astype(np.float32), f1.astype(np.float32)
+    f0[:20] = 0.5
+    f1[:20] = 0.5
+    frames = np.stack([f0, f1])
+    right = np.stack([np.zeros_like(gt), gt]).astype(np.float32)
+    wrong = right.copy()
+    wrong[1, 30:54, 24:56] += np.float32(3.0)  # textured square
+    wrong[1, 4:12, 10:70] += np.float32(3.0)  # flat band
+    inner = (slice(36, 48), slice(30, 50))
+    flat = (slice(6, 10), slice(14, 66))
+    for coupled, decoupled in ((right, wrong), (wrong, right)):
+        soft, _ = fuse_decoupled(frames, 0, coupled, decoupled, 0.005, softness=0.5)
+        assert np.abs(soft[1][inner] - right[1][inner]).max() < 1e-3
+        step = decoupled[1] - coupled[1]
+        w = (soft[1] - coupled[1])[flat][..., 0] / step[flat][..., 0]
+        np.testing.assert_allclose(w, 1.0 / (1.0 + np.exp(2.0)), atol=1e-4)
+        np.testing.assert_allclose((soft[1] - coupled[1])[flat][..., 1],
+                                   w * step[flat][..., 1], atol=1e-5)
+        both = np.all(coupled[1] == decoupled[1], axis=-1)
+        np.testing.assert_array_equal(soft[1][both], coupled[1][both])
+    wider, share = fuse_decoupled(frames, 0, wrong, right, 0.005, softness=4.0)
+    w4 = (wider[1] - wrong[1])[flat][..., 0] / np.float32(-3.0)
+    np.testing.assert_allclose(w4, 1.0 / (1.0 + np.exp(0.25)), atol=1e-4)
+    assert 0 < share < 1
+    narrow, _ = fuse_decoupled(frames, 0, wrong, right, 0.005, softness=1e-4)
+    hard, _ = fuse_decoupled(frames, 0, wrong, right, 0.005)
+    np.testing.assert_array_equal(hard[1][flat], wrong[1][flat])  # a tie keeps the coupled
+    assert np.mean(np.abs(narrow - hard) > 1e-3) < 0.002
 
 
 def test_rlr_fuses_its_linked_and_its_decoupled_refinement(small_seq):
@@ -443,8 +487,8 @@ def test_rlr_fuses_its_linked_and_its_decoupled_refinement(small_seq):
     params = make_track_params("rlr", n_warps=2, max_iterations=20, ustep_iterations=20)
     stats: dict = {}
     ticks: list = []
-    fused = track_rlr(frames, s.ref, params, callback=lambda d, t: ticks.append((d, t)),
-                      stats=stats)
+    fused = track_rlr(frames, s.ref, params.replace(fusion_softness=0.0),
+                      callback=lambda d, t: ticks.append((d, t)), stats=stats)
     linked = track_rlr(frames, s.ref, params.replace(decoupled_fusion=False))
     free = track_rlr(frames, s.ref, params.replace(link_weight=0.0))
     same_link = np.all(fused == linked, axis=-1)
@@ -452,5 +496,12 @@ def test_rlr_fuses_its_linked_and_its_decoupled_refinement(small_seq):
     assert np.all(same_link | same_free)
     assert 0 < stats["decoupled_share"] < 1
     assert (~same_link).any() and (~same_free).any()
+    # the default blends: every displacement lies between the two runs' ones
+    soft_stats: dict = {}
+    soft = track_rlr(frames, s.ref, params, stats=soft_stats)
+    lo, hi = np.minimum(linked, free), np.maximum(linked, free)
+    assert np.all(soft >= lo - 1e-5) and np.all(soft <= hi + 1e-5)
+    assert 0 < soft_stats["decoupled_share"] < 1
+    assert np.any(np.all(soft != linked, axis=-1) & np.all(soft != free, axis=-1))
     assert [d for d, _ in ticks] == list(range(1, len(ticks) + 1))  # one bar, no restart
     assert all(t == ticks[-1][1] for _, t in ticks) and ticks[-1][0] == ticks[-1][1]
