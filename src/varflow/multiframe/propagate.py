@@ -81,12 +81,20 @@ from ..twoframe.tvl1 import TVL1Params, solve_warp
 from .track import TrackCallback
 
 __all__ = [
+    "DEFAULT_REPAIR_COST",
+    "REPAIR_COSTS",
     "frame_pyramids",
     "extrapolate",
     "propagate_trajectories",
 ]
 
 log = logging.getLogger(__name__)
+
+#: The residuals a repair can compare (:func:`varflow.ops.fusion.repair_with`).
+REPAIR_COSTS: tuple[str, ...] = ("colour", "relit", "census")
+#: The default of :func:`propagate_trajectories` and of
+#: :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_cost` (one value for both).
+DEFAULT_REPAIR_COST = "relit"
 
 
 def frame_pyramids(frames: np.ndarray, params: TVL1Params) -> list[list[np.ndarray]]:
@@ -128,7 +136,7 @@ def propagate_trajectories(
     cost: str = "census",
     repair_distances: tuple[int, ...] = (2, 4, 8),
     repair_adjacent: bool = True,
-    repair_cost: str = "relit",
+    repair_cost: str = DEFAULT_REPAIR_COST,
     support_radius: int = 2,
     support_gamma: float = 0.1,
     callback: TrackCallback | None = None,
@@ -190,7 +198,7 @@ def propagate_trajectories(
     """
     if cost not in ("census", "colour"):
         raise ValueError(f"cost: must be 'census' or 'colour', got {cost!r}")
-    if repair_cost not in ("colour", "relit", "census"):
+    if repair_cost not in REPAIR_COSTS:
         raise ValueError(f"repair_cost: must be 'colour', 'relit' or 'census', "
                          f"got {repair_cost!r}")
     t0 = time.perf_counter()
