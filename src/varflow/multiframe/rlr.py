@@ -121,12 +121,14 @@ from typing import Any
 
 import numba as nb
 import numpy as np
+from scipy.special import expit
 
 from .._validate import check_field as _check
 from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import (
     census_planes,
     flow_cost,
+    fuse,
     noise_sigma,
     repair_with,
     support_weights,
@@ -1792,18 +1794,16 @@ def fuse_decoupled(frames: np.ndarray, ref: int, coupled: np.ndarray, decoupled:
     others = [n for n in range(frames.shape[0]) if n != ref]
     for n in others:
         planes_n = census_planes(frames[n])
-        cost_c = flow_cost(planes, planes_n, coupled[n], weights, truncation=0.5)
-        cost_d = flow_cost(planes, planes_n, decoupled[n], weights, truncation=0.5)
-        dn = np.asarray(decoupled[n], np.float32)
         if width > 0:
-            z = np.clip((cost_c - cost_d - np.float32(margin)) / np.float32(width), -60, 60)
-            w = (1.0 / (1.0 + np.exp(-z))).astype(np.float32)
-            out[n] += w[..., None] * (dn - out[n])
+            cost_c = flow_cost(planes, planes_n, coupled[n], weights, truncation=0.5)
+            cost_d = flow_cost(planes, planes_n, decoupled[n], weights, truncation=0.5)
+            w = expit((cost_c - cost_d - np.float32(margin)) / np.float32(width))
+            out[n] += w[..., None] * (np.asarray(decoupled[n], np.float32) - out[n])
             taken += float(w.sum(dtype=np.float64))
         else:
-            better = cost_d < cost_c - np.float32(margin)
-            out[n][better] = dn[better]
-            taken += int(better.sum())
+            out[n], choice = fuse(planes, planes_n, [coupled[n], decoupled[n]], weights,
+                                  truncation=0.5, margin=margin)
+            taken += int(choice.sum())
     share = taken / max(1, len(others) * frames.shape[1] * frames.shape[2])
     return out, float(share)
 
