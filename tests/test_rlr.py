@@ -112,9 +112,10 @@ def test_certified_prox_on_degenerate_terms():
         assert np.all(e_v <= e_ref + 1e-6)
 
 
-@pytest.mark.parametrize("exact, huber", [(False, 0.0), (True, 0.0), (False, 0.05),
-                                          (True, 0.05)])
-def test_ustep_numba_matches_numpy(exact, huber):
+@pytest.mark.parametrize("exact, huber, theta", [(False, 0.0, 0.0), (True, 0.0, 0.0),
+                                                 (False, 0.05, 0.0), (True, 0.05, 0.0),
+                                                 (False, 0.02, 0.3), (True, 0.0, 0.3)])
+def test_ustep_numba_matches_numpy(exact, huber, theta):
     h, w = 12, 15
     ix, iy, a = _terms(h, w, 3)
     g = (0.5 + RNG.random((h, w))).astype(np.float32)
@@ -125,7 +126,8 @@ def test_ustep_numba_matches_numpy(exact, huber):
         q = np.zeros((a.shape[0], h, w), np.float32)
         n = kern(ix, iy, a, g, u, p, q, np.empty_like(u), NO_M, np.float32(0), np.float32(40),
                  np.float32(0.25),
-                 30, np.float32(0), 1, exact, row_blocks(h), np.float32(huber))
+                 30, np.float32(0), 1, exact, row_blocks(h), np.float32(huber),
+                 np.float32(theta), 3)
         assert n == 30
         outs.append((u, p))
     np.testing.assert_allclose(outs[0][0], outs[1][0], atol=2e-4)
@@ -178,6 +180,74 @@ def test_primal_dual_reaches_a_lower_energy_than_the_coupled_tvl1_scheme():
     assert e_pd < _energy(np.zeros_like(u), ix, iy, a, g, 40.0)
 
 
+@pytest.mark.parametrize("exact", [False, True])
+def test_relaxed_ustep_reaches_the_minimiser_of_the_coupled_tvl1_scheme(exact):
+    # With θ > 0 the U-step's data term is the Moreau envelope M_θ(λ|ρ|): the energy
+    # that Zach's scheme of tvl1 minimises, min_v TV(u) + |u − v|²/(2θ) + λ|ρ(v)|.
+    # Both solvers meet at its minimiser; the exact energy (θ = 0) has another.
+    h, w = 20, 24
+    ix, iy, a = _terms(h, w, 3, link=False, seed=5)
+    g = np.ones((h, w), np.float32)
+    uz = np.zeros((2, h, w), np.float32)
+    pz = np.zeros((4, h, w), np.float32)
+    tvl1_iterations(ix, iy, a, g, np.zeros((3, 1, 1), np.float32), uz, pz, pz,
+                    np.zeros((3, h, w), np.float32), np.float32(40), np.float32(0.3),
+                    np.float32(0.25), 4000, np.float32(0), 2, False, row_blocks(h))
+    res = {}
+    for theta in (0.0, 0.3):
+        u = np.zeros((2, h, w), np.float32)
+        ustep_iterations(ix, iy, a, g, u, np.zeros((4, h, w), np.float32),
+                         np.zeros((3, h, w), np.float32), np.empty_like(u), NO_M,
+                         np.float32(0), np.float32(40), np.float32(0.25), 4000, np.float32(0),
+                         2, exact, row_blocks(h), np.float32(0), np.float32(theta))
+        res[theta] = np.abs(u - uz).max()
+    assert res[0.3] < 2e-3, res
+    assert res[0.0] > 0.1, res  # the two energies differ by far more than that
+
+
+def _relaxed_energy(u, ix, iy, a, g, lam, theta, tau, lk):
+    """TV + λ M_θ(|ρ|) + τ |u − l|_1 for one data channel: the envelope is Huber in ρ."""
+    gg = ix[0].astype(np.float64) ** 2 + iy[0].astype(np.float64) ** 2
+    rho = a[0] + ix[0] * u[0] + iy[0] * u[1]
+    zone = lam * theta * gg
+    env = np.where(np.abs(rho) <= zone, rho ** 2 / (2 * theta * gg),
+                   lam * np.abs(rho) - lam * zone / 2)
+    tv = sum((g * np.sqrt((gradient(u[k]) ** 2).sum(-1))).sum() for k in (0, 1))
+    return float(env.sum() + tv + tau * np.abs(u - lk).sum())
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_relaxed_ustep_keeps_the_link_exact(exact):
+    # With a link, the relaxed U-step minimises TV + λ M_θ(|ρ|) + τ |u − l|_1: the
+    # envelope is of the data term alone, the link stays an L1 term on u.  Its
+    # result has the lowest such energy against perturbations, and a lower one than
+    # the Moreau envelope of data and link together (the link made Huber).
+    h, w = 14, 16
+    rng = np.random.default_rng(3)
+    ix0, iy0, a0 = _terms(h, w, 1, link=False, seed=3)
+    lk = rng.normal(scale=0.3, size=(2, h, w)).astype(np.float32)
+    lam, theta, tau = 40.0, 0.3, 2.0
+    ix, iy, a = link_channels(ix0, iy0, a0, lk, tau / lam)
+    g = np.full((h, w), 0.5, np.float32)
+    u = np.zeros((2, h, w), np.float32)
+    ustep_iterations(ix, iy, a, g, u, np.zeros((4, h, w), np.float32),
+                     np.zeros((3, h, w), np.float32), np.empty_like(u), NO_M, np.float32(0),
+                     np.float32(lam), np.float32(0.25), 3000, np.float32(0), 2, exact,
+                     row_blocks(h), np.float32(0), np.float32(theta), 1)
+    e = _relaxed_energy(u, ix0, iy0, a0, g, lam, theta, tau, lk)
+    for _ in range(10):
+        d = u + 1e-3 * rng.normal(size=u.shape).astype(np.float32)
+        assert _relaxed_energy(d, ix0, iy0, a0, g, lam, theta, tau, lk) >= e - 1e-4
+    # the envelope of data and link together (Zach's scheme with the link as a channel)
+    uz = np.zeros((2, h, w), np.float32)
+    pz = np.zeros((4, h, w), np.float32)
+    tvl1_iterations(ix, iy, a, g, np.zeros((3, 1, 1), np.float32), uz, pz, pz,
+                    np.zeros((3, h, w), np.float32), np.float32(lam), np.float32(theta),
+                    np.float32(0.25), 3000, np.float32(0), 2, False, row_blocks(h))
+    assert _relaxed_energy(uz, ix0, iy0, a0, g, lam, theta, tau, lk) > e + 1e-2
+    assert np.abs(uz - u).max() > 0.05
+
+
 @pytest.fixture(scope="module")
 def small_seq():
     return make_sequence("affine", n_frames=7, shape=(56, 72), magnitude=3.0, seed=2,
@@ -190,7 +260,8 @@ FULL_ENERGY = {"grey": True, "data_weight": 15.0, "gradient_weight": 140.0, "hub
 
 
 @pytest.mark.parametrize("energy", [{}, FULL_ENERGY,
-                                    {**FULL_ENERGY, "data_normalisation": 0.05}])
+                                    {**FULL_ENERGY, "data_normalisation": 0.05},
+                                    {**FULL_ENERGY, "relaxed_data": False}])
 def test_link_weight_zero_gives_independent_two_frame_problems(small_seq, energy):
     """τ = 0 decouples the U-step into independent problems of the chosen energy."""
     s = small_seq
