@@ -156,6 +156,7 @@ from ..ops.prox import (
     prox_huber_conjugate,
     prox_linear_l1,
     prox_linear_l1_exact,
+    soft_threshold,
 )
 from ..ops.pyramid import pyramid_shapes, resize_bilinear, resize_flow, smooth_image
 from ..ops.warp import warp_bicubic
@@ -1144,13 +1145,13 @@ def _relaxed_primal_row(ix, iy, a, q, u, p, v, m, beta, i, old, s, lam, theta, n
     ``u = prox_{s G}(u + s div p)`` with ``G = |u − v|²/(2θ) + link [+ β/2 |u − m|²]``:
     the quadratics combine into one centre ``c`` with weight ``W = 1/s + 1/θ + β``, and
     each link channel ``λ r_k |u_k − l_k|`` moves ``c_k`` towards ``l_k`` by at most
-    ``λ r_k / W``.
+    ``λ r_k / W``.  ``v``: (2, W) scratch for the row of ``v``.
     """
     w = u.shape[2]
     o1 = old[0]
     o2 = old[1]
-    v1 = v[0, i]
-    v2 = v[1, i]
+    v1 = v[0]
+    v2 = v[1]
     for j in range(w):
         o1[j] = u[0, i, j]
         o2[j] = u[1, i, j]
@@ -1257,12 +1258,12 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
     t = lam * s
     nd = nk if n_data < 0 else n_data
     relaxed = theta > F0
-    v = np.empty((2, h, w) if relaxed else (2, 1, 1), np.float32)
     sigma = F1 / (np.float32(8.0) * s)
     tol2 = tol * tol
     n_blk = blocks.shape[0] - 1
     errs = np.zeros(h, np.float64)  # per row: the stopping test does not depend on blocks
     old = np.empty((n_blk, 2, w), np.float32)
+    vrow = np.empty((n_blk, 2, w), np.float32)  # v of the relaxed data term, one row
     sc = np.empty((n_blk, 4, nk), np.float64)
     it = 0
     while it < max_iter:
@@ -1270,9 +1271,9 @@ def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol
         for b in nb.prange(n_blk):
             for i in range(blocks[b], blocks[b + 1]):
                 if relaxed:
-                    errs[i] = _relaxed_primal_row(ix, iy, a, q, u, p, v, m, beta, i, old[b],
-                                                  s, lam, theta, nd, n_sweeps, exact, sc[b],
-                                                  ubar)
+                    errs[i] = _relaxed_primal_row(ix, iy, a, q, u, p, vrow[b], m, beta, i,
+                                                  old[b], s, lam, theta, nd, n_sweeps, exact,
+                                                  sc[b], ubar)
                 else:
                     errs[i] = _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old[b],
                                                 s, t, n_sweeps, exact, sc[b])
@@ -1303,8 +1304,7 @@ def _relaxed_prox_numpy(ix, iy, a, q, old, z, m, beta, lam, s, theta, n_data, n_
         r = (ix if k == 0 else iy)[nd + k]
         lk = np.where(r > 0, -a[nd + k] / np.where(r > 0, r, 1), 0)
         thr = lam * r / wq
-        d = c[..., k] - lk
-        c[..., k] = np.where(r > 0, lk + np.sign(d) * np.maximum(np.abs(d) - thr, 0), c[..., k])
+        c[..., k] = np.where(r > 0, lk + soft_threshold(c[..., k] - lk, thr), c[..., k])
     return c
 
 
