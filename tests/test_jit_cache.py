@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from varflow import _jit
@@ -76,3 +77,35 @@ def test_notice_only_when_sure_and_not_quiet(
     assert rc == 0
     assert (NOTICE in err) is shown, err
     assert asked == ([] if quiet else ["tvl1"])
+
+
+_REPRO = """
+import sys
+import numpy as np
+import varflow
+from varflow.generators.photo import make_photo_clip
+
+clip = make_photo_clip("illumination", 101, n_frames=7, shape=(64, 96))
+traj = varflow.track(clip.frames, clip.ref, "rlr")
+flow = varflow.flow(clip.frames[clip.ref], clip.frames[0], "tvl1-ld")
+np.save(sys.argv[1], np.concatenate([traj.ravel(), flow.ravel()]))
+"""
+
+
+@pytest.mark.slow
+def test_cold_and_warm_cache_agree_bit_for_bit(tmp_path: Path) -> None:
+    """The first run on a machine (kernels compiled in the process) and a later one
+    (kernels loaded from Numba's cache) give the same bits: rlr and tvl1-ld on a
+    clip whose sky the trackers find hard (before ``varflow._jit.FASTMATH`` dropped
+    ``nsz`` they differed by pixels)."""
+    env = _fresh_env(tmp_path / "cache")
+    script = tmp_path / "repro.py"
+    script.write_text(_REPRO)
+    outs = []
+    for run in ("cold", "warm"):
+        out = tmp_path / f"{run}.npy"
+        done = subprocess.run([sys.executable, str(script), str(out)], capture_output=True,
+                              text=True, env=env, timeout=1200)
+        assert done.returncode == 0, done.stderr
+        outs.append(np.load(out))
+    assert outs[0].tobytes() == outs[1].tobytes(), float(np.nanmax(np.abs(outs[0] - outs[1])))

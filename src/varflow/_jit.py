@@ -19,9 +19,26 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["COMPILE_SECONDS", "compile_seconds", "kernels_cached", "method_kernels"]
+__all__ = ["COMPILE_SECONDS", "FASTMATH", "FASTMATH_NAN", "compile_seconds", "kernels_cached",
+           "method_kernels"]
 
 log = logging.getLogger(__name__)
+
+#: Fast-math flags of the kernels: Numba's ``fastmath=True`` without ``nsz`` (no
+#: signed zeros).  With ``nsz`` and ``reassoc`` together, the code LLVM makes when a
+#: kernel is compiled in the running process and the code Numba stores in, and later
+#: loads from, its cache round differently (one unit in the last place on 29 % of
+#: the pixels of ROF's primal-dual iterations), so that the first run of a method on
+#: a machine (cold cache) and every later run (warm cache) disagreed, and a chaotic
+#: clip amplified that into pixels (rlr on a 9-frame clip: up to 72 px).  Either flag
+#: alone gives the same code both ways; ``reassoc`` is kept because the sums need it
+#: to vectorise.  ``tests/test_jit_cache.py`` checks a cold and a warm run agree bit
+#: for bit.
+FASTMATH = {"nnan", "ninf", "arcp", "contract", "afn", "reassoc"}  # a set, as Numba wants
+
+#: :data:`FASTMATH` without the no-NaN and no-infinity assumptions, for kernels that
+#: must detect NaN (invalid flow).
+FASTMATH_NAN = {"arcp", "contract", "afn", "reassoc"}
 
 #: Kernels (``"module:function"``) every two-frame and trajectory method compiles.
 SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_kernel")

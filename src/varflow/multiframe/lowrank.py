@@ -64,6 +64,8 @@ from typing import Any, Literal
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
+
 __all__ = [
     "trajectories_to_matrix",
     "matrix_to_trajectories",
@@ -422,7 +424,7 @@ def l1_regression_numpy(
     return out, _l1_info(iters, max_iter, unconverged)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _l1_kernel(U, qt, wts, tol, rho, max_iter, out, iters):
     m, n = U.shape
     weighted = wts.shape[0] == m

@@ -131,6 +131,7 @@ import numba as nb
 import numpy as np
 from scipy.special import expit
 
+from .._jit import FASTMATH
 from .._validate import check_field as _check
 from ..ops.differences import derivative_planes, divergence, gradient
 from ..ops.fusion import (
@@ -1068,7 +1069,7 @@ def set_link_targets(a: np.ndarray, n_data: int, lk: np.ndarray,
 
 
 # ------------------------------------------------------------------------ U-step
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps, exact, sc):
     """Primal step of row ``i``: ``ũ = prox_{sG}(u + s div p)``; ``ubar = 2ũ − u``.
 
@@ -1106,7 +1107,7 @@ def _ustep_primal_row(ix, iy, a, q, u, p, ubar, m, beta, i, old, s, t, n_sweeps,
     return _extrapolate_row(u, ubar, i, o1, o2)
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _extrapolate_row(u, ubar, i, o1, o2):
     """``ubar = 2u − old`` on row ``i``; returns the squared change of the row."""
     d1 = u[0, i]
@@ -1123,7 +1124,7 @@ def _extrapolate_row(u, ubar, i, o1, o2):
     return err
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _shrink_towards(c, lk, thr):
     """``argmin_x (x − c)²/2 + thr |x − lk|``: ``c`` moved towards ``lk`` by at most ``thr``."""
     d = c - lk
@@ -1134,7 +1135,7 @@ def _shrink_towards(c, lk, thr):
     return lk
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _relaxed_primal_row(ix, iy, a, q, u, p, v, m, beta, i, old, s, lam, theta, n_data,
                         n_sweeps, exact, sc, ubar):
     """Primal step of row ``i`` of the relaxed U-step (``theta`` = θ > 0).
@@ -1194,7 +1195,7 @@ def _relaxed_primal_row(ix, iy, a, q, u, p, v, m, beta, i, old, s, lam, theta, n
     return _extrapolate_row(u, ubar, i, o1, o2)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def ustep_iterations(ix, iy, a, g, u, p, q, ubar, m, beta, lam, s, max_iter, tol, n_sweeps,
                      exact, blocks, huber=F0, theta=F0, n_data=-1):
     """Numba primal-dual (Condat / Chambolle-Pock) iterations of one frame's U-step.

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
+
 __all__ = ["gradient", "divergence", "image_derivatives", "derivative_planes",
            "derivative_planes_numpy"]
 
@@ -108,7 +110,7 @@ def stencil5(m2, m1, p1, p2):
     return (m2 - 8 * m1 + 8 * p1 - p2) * _C12
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _derivative_planes_kernel(img, out):
     h, w, nc = img.shape
     for i in nb.prange(h):

@@ -49,6 +49,7 @@ import math
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
 from .warp import in_bounds
 
 __all__ = [
@@ -290,7 +291,7 @@ def _aggregate_numpy(res, weights, radius, trunc):
     return np.where(tot > 0, out / np.maximum(tot, 1e-30), trunc).astype(np.float32)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _residual_kernel(i0, i1, flow, dy, dx, trunc, out):
     h, w, nc = i0.shape
     inv_c = np.float32(1.0 / nc)
@@ -336,7 +337,7 @@ def _aggregate_row(res, weights, offs, i, trunc, acc, tot):
         acc[j] = acc[j] / tot[j] if tot[j] > 0.0 else trunc
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _aggregate_kernel(res, weights, offs, trunc, out):
     h, w = res.shape
     for i in nb.prange(h):
@@ -354,7 +355,7 @@ def _inside(i, j, u, v, h, w):
     return x >= 0.0 and x <= w - 1.0 and y >= 0.0 and y <= h - 1.0
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _repair_step_kernel(i0, i1, src, dy, dx, weights, offs, trunc, margin, res, best, cost,
                         changed):
     """One candidate of :func:`repair`: the field ``src`` shifted by ``(dy, dx)``."""

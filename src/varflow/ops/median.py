@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
+from .._jit import FASTMATH
 from ._median_network import median25
 from .fusion import _NO_REASSOC, _exp_neg_row
 
@@ -93,7 +94,7 @@ def _median_kernel(src, out, size):
                 out[i, j, c] = _select(buf, n, half)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _median5_kernel(src, out):
     """5x5 median of planar ``(K, H, W)`` data with replicated borders.
 
@@ -387,7 +388,7 @@ def weighted_median_flow_numpy(
     return out
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True, fastmath=FASTMATH)
 def _weighted_median_padded(v, w, n, half):
     """Smallest v[a] with sum(w[v <= v[a]]) >= half, without branches on the data.
 

@@ -38,6 +38,8 @@ import math
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
+
 __all__ = [
     "F0",
     "F1",
@@ -80,7 +82,7 @@ def row_blocks(h: int) -> np.ndarray:
 # checks and LLVM vectorises the loops.
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
     """Prox of the linearised colour L1 term for row ``i`` (in place on d1, d2, q).
 
@@ -118,7 +120,7 @@ def data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
                 d2[j] = e2 - t * qn * gy
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def primal_row(u, tp, i, k, d, theta):
     """``u_k[i] = d + θ div(tp_k)[i]``; returns the squared change of the row.
 
@@ -158,7 +160,7 @@ def primal_row(u, tp, i, k, d, theta):
     return err
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 def shrink_project(zx, zy, lim, se):
     """``Π_{|p| ≤ lim}(z / (1 + se / lim))`` as ``z · lim / max(lim + se, |z|)``.
 
@@ -170,7 +172,7 @@ def shrink_project(zx, zy, lim, se):
     return zx * s, zy * s
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
     """Dual TV step for row ``i``: ``p ← Π_{|p| ≤ g}(p + step · T ∇u)``; ``tp = T p``.
 
@@ -220,7 +222,7 @@ def dual_row(u, p, tp, g, tens, i, step, aniso, huber=0.0):
                 tpyr[j] = t12 * px + t22 * py
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps):
     """Data prox and primal update of row ``i`` (``d1``, ``d2``: row buffers); returns
     the squared change of the flow on the row."""
@@ -232,7 +234,7 @@ def prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps):
     return primal_row(u, tp, i, 0, d1, theta) + primal_row(u, tp, i, 1, d2, theta)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def project_dual(p, g):
     """Project the dual TV pairs ``(p[2k], p[2k+1])`` of planar ``(4, H, W)`` ``p`` onto
     the balls of radius ``g`` (H, W), in place (the dual step's projection)."""

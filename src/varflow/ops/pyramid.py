@@ -16,6 +16,8 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
+from .._jit import FASTMATH
+
 __all__ = [
     "pyramid_shapes",
     "build_pyramid",
@@ -46,7 +48,7 @@ def pyramid_shapes(
     return shapes
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _resize_kernel(src, out):
     hs, ws, k = src.shape
     hd, wd, _ = out.shape
@@ -126,7 +128,7 @@ def smooth_image_fast(image: np.ndarray, sigma: float) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(smooth_planes(x, sigma), 0, -1))
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _smooth_planar_kernel(x, taps, out):
     """Separable smoothing of the rows and columns of a (possibly strided) ``(H, W, K)``
     view into planar ``(K, H, W)`` output, edges replicated (each row is first copied

@@ -19,6 +19,7 @@ import math
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
 from .differences import divergence, gradient
 
 __all__ = ["rof_denoise", "rof_denoise_numpy", "structure_texture"]
@@ -59,7 +60,7 @@ def rof_denoise_numpy(f: np.ndarray, theta: float, n_iter: int) -> np.ndarray:
 _F1 = np.float32(1.0)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def _rof_kernel(f, theta, sched, u, ubar, px, py):
     """Chambolle-Pock iterations on planar ``(C, H, W)`` arrays, in place.
 

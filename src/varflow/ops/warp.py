@@ -17,6 +17,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH_NAN
+
 __all__ = ["warp_bicubic", "warp_bicubic_numpy", "warp_bilinear", "warp_bilinear_numpy",
            "keys_weights", "in_bounds", "bilinear_at", "bilinear_cell"]
 
@@ -100,7 +102,7 @@ def _far(t):
 
 
 # fast-math without the no-NaN/no-inf assumptions: NaN flows must be detected
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+_FASTMATH = FASTMATH_NAN
 
 
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)

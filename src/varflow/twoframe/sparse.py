@@ -64,6 +64,7 @@ from functools import lru_cache
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
 from ..ops.differences import divergence, gradient
 from ..ops.primal_dual import EPS_GRAD, dual_row, ordered_sum, primal_row, row_blocks
 from ..ops.prox import prox_huber_conjugate
@@ -495,7 +496,7 @@ def coverage_weight(shape: tuple[int, int], params: SparseFields) -> np.ndarray:
 # --------------------------------------------------------------------- Nesterov
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _huber_dual_row(y, s, g, tens, i, mu, aniso):
     """``s_k = D (g D∇y_k / max(μ, |D∇y_k|))`` for row ``i`` (both components)."""
     h = y.shape[1]
@@ -534,7 +535,7 @@ def _huber_dual_row(y, s, g, tens, i, mu, aniso):
                 sy[j] = t12 * gx + t22 * gy
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d, g1, g2):
     """Gradient step ``u = y − P⁻¹ ∇E(y)`` for row ``i`` (g1, g2: row work buffers).
 
@@ -591,7 +592,7 @@ def _nesterov_row(ix, iy, a, y, s, ubar, wsp, pinv, u, i, lam, lam_tv, mu_d, g1,
         u2[j] = y2[j] - pr[j] * g2[j]
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def nesterov_iterations(ix, iy, a, g, tens, aniso, ubar, wsp, u, lam, lam_tv, mu_t_seq,
                         mu_d_seq, n_iter, blocks):
     """Preconditioned Nesterov iterations on the smoothed combined energy (in place on u).
@@ -727,7 +728,7 @@ def _continuation(mu: float, stages: int) -> np.ndarray:
 # --------------------------------------------------------------------- primal-dual
 
 
-@nb.njit(cache=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
     """:func:`varflow.ops.primal_dual.data_prox_row` with a per-pixel step ``tr[j]``.
 
@@ -766,7 +767,7 @@ def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
                 d2[j] = e2 - t * qn * gy
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv, theta, tau,
                          max_iter, tol, n_sweeps, aniso, blocks, huber=0.0):
     """Exact TV-L1 primal-dual iterations on the combined energy (in place on u, p, tp, q).

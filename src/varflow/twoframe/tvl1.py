@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .._jit import FASTMATH
 from ..ops.differences import (
     derivative_planes,
     derivative_planes_numpy,
@@ -311,7 +312,7 @@ def edge_weight(image: np.ndarray, c: float, g_min: float = 0.05) -> np.ndarray:
     return np.maximum(np.exp(-c * mag2), g_min).astype(np.float32)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def tvl1_iterations(
     ix, iy, a, g, tens, u, p, tp, q, lam, theta, tau, max_iter, tol, n_sweeps, aniso, blocks,
     huber=0.0,
@@ -519,7 +520,7 @@ def linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
     return planar(ixh), planar(iyh), planar(ah)
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
     """One task per channel and row: the row views let the loop run without a
     per-pixel branch (the ``inside`` mask multiplies)."""
@@ -710,7 +711,7 @@ def _smoothed_stack(dx, dy, sigma: float) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True, fastmath=True, inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
 def _gradient_pixel(ins, jx, jy, gx0, gy0, hxx, hxy1, hyx, hyy, u0, v0, wg):
     """The two gradient-constancy channels of one pixel: ``(ix, iy, a)`` of the x
     channel, then of the y channel (zero outside)."""
@@ -720,7 +721,7 @@ def _gradient_pixel(ins, jx, jy, gx0, gy0, hxx, hxy1, hyx, hyy, u0, v0, wg):
             m * hxy, m * hyy, m * (jy - gy0 - hxy * u0 - hyy * v0))
 
 
-@nb.njit(cache=True, parallel=True, fastmath=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _gradient_channels_kernel(j1, i0, inside, flow0, wg, k0, ix, iy, a):
     """Gradient-constancy channels ``k0 .. k0 + 2G`` of :func:`data_channels` in one pass.
 
