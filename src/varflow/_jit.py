@@ -19,8 +19,8 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["COMPILE_SECONDS", "FASTMATH", "FASTMATH_NAN", "compile_seconds", "kernels_cached",
-           "method_kernels"]
+__all__ = ["COMPILE_SECONDS", "FASTMATH", "FASTMATH_NAN", "FASTMATH_NO_REASSOC", "compile_seconds",
+           "kernels_cached", "method_kernels"]
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,12 @@ FASTMATH = {"nnan", "ninf", "arcp", "contract", "afn", "reassoc"}  # a set, as N
 #: :data:`FASTMATH` without the no-NaN and no-infinity assumptions, for kernels that
 #: must detect NaN (invalid flow).
 FASTMATH_NAN = {"arcp", "contract", "afn", "reassoc"}
+
+#: Fast-math flags without ``reassoc``, for kernels whose arithmetic order matters:
+#: the two-constant range reduction of :func:`varflow.ops.fusion._exp_neg_row` must
+#: not be folded into one multiplication (fusion's support weights, the weighted
+#: median).  ``nsz`` without ``reassoc`` gives the same code cold and warm.
+FASTMATH_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 #: Kernels (``"module:function"``) every two-frame and trajectory method compiles.
 SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_kernel")

@@ -49,7 +49,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .._jit import FASTMATH
+from .._jit import FASTMATH, FASTMATH_NO_REASSOC
 from .warp import in_bounds
 
 __all__ = [
@@ -115,12 +115,7 @@ def _support_weights_numpy(img: np.ndarray, radius: int, gamma: float) -> np.nda
     return out
 
 
-#: Fast-math flags without ``reassoc``: the two-constant range reduction of
-#: :func:`_exp_neg_row` must not be folded into one multiplication.
-_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
-
-
-@nb.njit(cache=True, fastmath=_NO_REASSOC, inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH_NO_REASSOC, inline="always")
 def _exp_neg_row(x, out, bits):
     """``out = exp(x)`` for float32 ``x <= 0``, in loops the compiler vectorises.
 
@@ -162,7 +157,7 @@ def _spatial_exponents(offs, radius):
     return spat
 
 
-@nb.njit(cache=True, fastmath=_NO_REASSOC, inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH_NO_REASSOC, inline="always")
 def _window_exponent_row(planar, i, yi, dx, w, inv_g, sk, d):
     """``d[j] = -|I(yi, j + dx) - I(i, j)|₁ / γ - s_k`` for row ``i`` of ``planar`` (C, H, W).
 
@@ -191,7 +186,7 @@ def _window_exponent_row(planar, i, yi, dx, w, inv_g, sk, d):
         d[j] = -d[j] * inv_g - sk
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH_NO_REASSOC)
 def _support_weights_kernel(planar, offs, gamma, radius, out):
     h, w = planar.shape[1:]
     nk = offs.shape[0]
@@ -603,7 +598,7 @@ def census_planes(image: np.ndarray, eps: float = 0.02) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH_NO_REASSOC)
 def _candidate_costs_kernel(planar, res, offs, gamma, radius, trunc, out):
     """:func:`candidate_costs` with the support weights made on the fly, row by row.
 

@@ -17,9 +17,9 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
-from .._jit import FASTMATH
+from .._jit import FASTMATH, FASTMATH_NO_REASSOC
 from ._median_network import median25
-from .fusion import _NO_REASSOC, _exp_neg_row
+from .fusion import _exp_neg_row
 
 __all__ = [
     "median_filter_flow",
@@ -428,7 +428,7 @@ def _weighted_median_padded(v, w, n, half):
     return best
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_NO_REASSOC)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH_NO_REASSOC)
 def _weighted_median_kernel(src, guide, vis, pixels, radius, sw, sc, out):
     """Weighted median of planar ``src`` (K, H, W) into ``out`` at flat ``pixels``.
 

@@ -101,11 +101,7 @@ def _far(t):
     return ((_FA * t - _F5A) * t + _F8A) * t - _F4A
 
 
-# fast-math without the no-NaN/no-inf assumptions: NaN flows must be detected
-_FASTMATH = FASTMATH_NAN
-
-
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH_NAN)  # NaN flows must be detected
 def _warp_kernel(planes, flow, out, inside):
     """Bicubic samples of ``planes`` (H, W, K) at ``x + flow``; ``flow`` planar (2, H, W)."""
     h, w, k = planes.shape
