@@ -471,20 +471,21 @@ def test_cli_on_real_rubberwhale(capsys: pytest.CaptureFixture[str], data_root: 
 def test_rlr_defaults_on_rubberwhale(data_root: Path) -> None:
     """RubberWhale frame 11, full resolution and full iterations, default parameters.
 
-    Measured (2026-12-01, benchmarks/README.md): the TV-L1 pair 0.0970 with both the
-    host build and NUMBA_CPU_NAME=generic; RLR 0.0959 / 0.0951 on the plain energy.
-    The builds move RLR by 0.0008.  Since issue 27 RLR's default energy is tvl1's
-    (TVL1_ENERGY, with the fit gate): 0.0998 on the host build (2026-12-02), 2.9 %
-    above the pair, so "RLR beats the pair" is not met on this clip; this test bounds
-    RLR within 6 % of the pair, which the full link on the frames next to the
-    reference breaks (0.1305 at ``adjacent_link_factor=1``, 2026-11-30).
+    Measured (2026-12-04, version 0.7.1, benchmarks/README.md): RLR 0.0965 on the host
+    build and 0.0962 with NUMBA_CPU_NAME=generic (cold and warm caches alike), the
+    TV-L1 pair 0.0970 on both.  The builds move RLR by 0.0003 and the gap to the pair
+    is 0.0005-0.0008, so "RLR beats the pair" stays a benchmark figure; this test
+    bounds RLR within 2 % of the pair (0.995 and 0.992 measured), which the exact data
+    term broke (0.0992, 2.3 % above, version 0.6.0) and the full link on the frames
+    next to the reference breaks by far (0.1305 at ``adjacent_link_factor=1``,
+    2026-11-30).
     """
     rows = bm.run_middlebury_multiframe(["rlr"], {}, progress=False, root=data_root,
                                         warm_up=False)
     rlr = next(r for r in rows if r["method"] == "rlr")
     pair = next(r for r in rows if r["method"] == bm.BASELINE_LABEL)
     assert 0.093 < pair["aee"] < 0.103, pair
-    assert rlr["aee"] < 1.06 * pair["aee"], (rlr["aee"], pair["aee"])
+    assert rlr["aee"] < 1.02 * pair["aee"], (rlr["aee"], pair["aee"])
 
 
 def test_cli_sintel_trajectories(capsys: pytest.CaptureFixture[str], alley_root: Path,
