@@ -382,7 +382,7 @@ def test_adjacent_link_factor_follows_the_frames_noise():
      ("visibility_levels", 0), ("visibility_warps", 0), ("lowrank_tolerance", 0.0),
      ("ustep_iterations", 0), ("flow_method", "tensor"), ("flow_method", "nope"),
      ("adjacent_link_factor", 1.5), ("adjacent_noise", 0.0), ("fusion_margin", -0.1),
-     ("fusion_noise", -1.0)],
+     ("fusion_noise", -1.0), ("fusion_evidence", -1.0), ("fusion_radius", 0.0)],
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):
@@ -508,6 +508,57 @@ def test_fusion_takes_the_decoupled_displacement_where_the_data_say_so():
     np.testing.assert_array_equal(hard, out)
     np.testing.assert_array_equal(fuse_decoupled(frames, 0, wrong, right, 0.0, 0.5)[0],
                                   fuse_decoupled(frames, 0, wrong, right, 0.0)[0])
+
+
+def test_fusion_evidence_lets_a_flat_region_follow_its_textured_surroundings():
+    """A planted pair with a flat square: the coupled field is off by (3, 3) px over
+    the square and a textured ring around it, the decoupled one is right.  Inside the
+    square both fit the frames equally (zero census cost), so each pixel alone keeps
+    mostly the coupled field (weight 1 / (1 + e²) of the decoupled one, 3.7 px off);
+    with the regional evidence the square follows the ring, where the costs tell the
+    two apart, and takes the decoupled field.  Where both fields agree nothing moves."""
+    from scipy.ndimage import gaussian_filter
+
+    from varflow.multiframe.rlr import fuse_decoupled, regional_evidence, texture_mask
+
+    rng = np.random.default_rng(5)
+    tex = gaussian_filter(rng.random((72, 96, 3)), (1.5, 1.5, 0)).astype(np.float32)
+    tex = (tex - tex.min()) / (tex.max() - tex.min())
+    dy, dx = 1, 2
+    f0 = tex.copy()
+    f1 = np.roll(tex, (dy, dx), axis=(0, 1))
+    f0[24:48, 32:64] = 0.5
+    f1[24 + dy:48 + dy, 32 + dx:64 + dx] = 0.5
+    frames = np.stack([f0, f1])
+    right = np.zeros((2, 72, 96, 2), np.float32)
+    right[1, ..., 0], right[1, ..., 1] = dx, dy
+    wrong = right.copy()
+    wrong[1, 14:58, 22:74] += np.float32(3.0)
+    flat = (slice(30, 42), slice(38, 58))
+    alone, _ = fuse_decoupled(frames, 0, wrong, right, 0.005, 0.5)
+    err_alone = np.linalg.norm(alone[1] - right[1], axis=-1)
+    assert err_alone[flat].mean() > 3.0  # 3.74
+    np.testing.assert_array_equal(
+        fuse_decoupled(frames, 0, wrong, right, 0.005, 0.5, evidence=0.0, radius=3.0)[0], alone)
+    out, _ = fuse_decoupled(frames, 0, wrong, right, 0.005, 0.5, evidence=3.0, radius=8.0)
+    err = np.linalg.norm(out[1] - right[1], axis=-1)
+    assert err[flat].max() < 0.05  # 0
+    assert err[16:22, 24:72].max() < 0.05  # the textured ring: right either way
+    assert err_alone[16:22, 24:72].max() < 0.05
+    np.testing.assert_array_equal(out[0], wrong[0])
+    hard, _ = fuse_decoupled(frames, 0, wrong, right, 0.005, 0.0, evidence=3.0, radius=8.0)
+    assert np.linalg.norm(hard[1] - right[1], axis=-1)[flat].max() < 0.05
+    assert np.all(np.all(hard == wrong, axis=-1) | np.all(hard == right, axis=-1))
+    # the pieces: no texture on a flat image; a constant difference is its own mean
+    # next to texture and 0 where no textured pixel is near
+    assert texture_mask(np.full((8, 8), 0.3, np.float32)).max() == 0.0
+    mask = texture_mask(f0)
+    assert mask[flat].max() == 0.0 and 0.4 < mask.mean() <= 0.5
+    half = np.zeros((40, 200), np.float32)
+    half[:, :20] = 1.0
+    e = regional_evidence(np.full((40, 200), 0.25, np.float32), half, 4.0)
+    np.testing.assert_allclose(e[:, :30], 0.25, rtol=1e-5)
+    assert np.all(e[:, 40:] == 0.0)  # beyond the Gaussian's reach (4σ)
 
 
 def test_soft_fusion_blends_the_two_refinements_near_the_margin():
