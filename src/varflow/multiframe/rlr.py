@@ -1939,7 +1939,8 @@ def texture_mask(image: np.ndarray) -> np.ndarray:
     return (mag > np.median(mag)).astype(np.float32)
 
 
-def regional_evidence(diff: np.ndarray, texture: np.ndarray, radius: float) -> np.ndarray:
+def regional_evidence(diff: np.ndarray, texture: np.ndarray, radius: float,
+                      support: np.ndarray | None = None) -> np.ndarray:
     """The Gaussian-weighted mean of ``diff`` over the textured pixels around each pixel.
 
     ``E = G_σ * (diff · t) / G_σ * t`` (:func:`varflow.ops.pyramid.smooth_image`,
@@ -1952,13 +1953,16 @@ def regional_evidence(diff: np.ndarray, texture: np.ndarray, radius: float) -> n
         :func:`texture_mask` of the reference.
     radius : float
         σ in pixels.
+    support : ndarray, shape (H, W), float32, optional
+        ``G_σ * t``, when the caller smooths one texture for many ``diff``
+        (computed here when omitted).
 
     Returns
     -------
     ndarray, shape (H, W), float32
     """
     num = smooth_image((diff * texture)[..., None], radius)[..., 0]
-    den = smooth_image(texture[..., None], radius)[..., 0]
+    den = smooth_image(texture[..., None], radius)[..., 0] if support is None else support
     out = np.zeros_like(num)
     np.divide(num, den, out=out, where=den >= 1e-6)
     return out
@@ -2024,6 +2028,9 @@ def fuse_decoupled(frames: np.ndarray, ref: int, coupled: np.ndarray, decoupled:
     weights = support_weights(frames[ref])
     width = float(softness) * float(margin)
     texture = texture_mask(frames[ref]) if evidence > 0 else None
+    support = None  # G_σ * texture: the same for every frame
+    if texture is not None:
+        support = smooth_image(texture[..., None], radius)[..., 0]
     taken = 0.0
     others = [n for n in range(frames.shape[0]) if n != ref]
     for n in others:
@@ -2033,7 +2040,8 @@ def fuse_decoupled(frames: np.ndarray, ref: int, coupled: np.ndarray, decoupled:
             cost_d = flow_cost(planes, planes_n, decoupled[n], weights, truncation=0.5)
             diff = cost_c - cost_d
             if texture is not None:
-                diff = diff + np.float32(evidence) * regional_evidence(diff, texture, radius)
+                diff = diff + np.float32(evidence) * regional_evidence(diff, texture, radius,
+                                                                       support)
             if width > 0:
                 w = expit((diff - np.float32(margin)) / np.float32(width))
                 out[n] += w[..., None] * (np.asarray(decoupled[n], np.float32) - out[n])
