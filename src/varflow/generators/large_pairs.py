@@ -148,7 +148,7 @@ def make_large_pair(
     # object paths are calibrated from mid-time: half the displacement each way; the
     # speed cap is lifted (two frames: only the displacement matters)
     objs, infos = photo_objects(rng, (h, w), _TIMES, 0.5 * obj_motion, 1e9, channels,
-                           [texture.name])
+                                [texture.name])
     layers = [PhotoLayer(motion, texture), *objs]
     clean = render(layers, (h, w), 2, channels, supersample)
     traj, vis, owner = _trajectories(layers, (h, w), 2, 0)

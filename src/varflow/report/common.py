@@ -93,7 +93,7 @@ def legend(page: Page, scale: float) -> str:
 
 
 def params_block(page: Page, method: str | None, params: dict[str, Any] | None,
-                  extra: dict[str, Any] | None = None) -> None:
+                 extra: dict[str, Any] | None = None) -> None:
     """Add the method and ``extra`` items, then the parameters (a ``<details>``), to ``page``."""
     items: dict[str, Any] = {}
     if method:
@@ -108,7 +108,7 @@ def params_block(page: Page, method: str | None, params: dict[str, Any] | None,
 
 
 def read_chosen(video: Video, chosen: Sequence[int],
-                 reader: Any) -> tuple[list[tuple[int, Any]], list[str]]:
+                reader: Any) -> tuple[list[tuple[int, Any]], list[str]]:
     """``(index, reader(file))`` for the chosen files of a video; unreadable ones are
     logged and returned as ``"name: error"`` problems instead."""
     loaded: list[tuple[int, Any]] = []

@@ -187,7 +187,7 @@ def _photometric(frame0: np.ndarray, frame1: np.ndarray,
 
 
 def report_flow(page: Page, path: Path, gt_path: PathArg | None,
-                 frame_paths: Sequence[Path] = ()) -> None:
+                frame_paths: Sequence[Path] = ()) -> None:
     """Add the report of a single flow file (with ``--gt`` and ``--frames``) to ``page``."""
     from ..evaluation.metrics import endpoint_error_map, evaluate
     from ..io import read_flow

@@ -170,7 +170,7 @@ def track_video(page: Page, video: Video, max_frames: int) -> list[str]:
 
 
 def report_trajectories(page: Page, path: Path, frames: Path | None,
-                         max_frames: int) -> None:
+                        max_frames: int) -> None:
     """Add the report of a single trajectory file (over ``frames``, the reference) to
     ``page``."""
     from ..io.trajectories import read_trajectories
@@ -190,7 +190,7 @@ def report_trajectories(page: Page, path: Path, frames: Path | None,
     for k, v in meta.items():
         extra[str(k)] = v
     params_block(page, method if isinstance(method, str) else None,
-                  params if isinstance(params, dict) else None, extra)
+                 params if isinstance(params, dict) else None, extra)
     scale = max_magnitude([traj.reshape(-1, 1, 2)])
     _trajectory_block(page, traj, ref, tf.visibility, scale=scale, max_frames=max_frames,
                       plot_side=LARGE_SIDE, thumb_side=THUMB_SIDE, background=background,
