@@ -63,11 +63,26 @@ This module is the public home of these names; each job lives in its own module:
 
 from __future__ import annotations
 
-from .codecs import VIDEO_EXTENSIONS, VIDEO_WRITE_EXTENSIONS, default_video_codec
+from . import codecs as _codecs
+from . import sequences as _sequences
+from .codecs import default_video_codec
 from .probe import VideoInfo, check_video_complete, video_info, video_rate
-from .sequences import IMAGE_EXTENSIONS, list_frame_files, read_frames
+from .sequences import list_frame_files, read_frames
 from .video_reader import VideoReader
 from .video_writer import VideoWriter, write_video
+
+# The tables are bound here with their doc comments, which the API reference shows.
+
+#: Still-image formats picked up from a directory (lower case, with the dot): the usual
+#: photo/scientific formats, restricted to those the installed Pillow can open.  Formats
+#: Pillow registers but that are not frame images (MPEG, EPS, HDF5 stubs, ...) are excluded.
+IMAGE_EXTENSIONS: frozenset[str] = _sequences.IMAGE_EXTENSIONS
+
+#: File extensions :func:`read_frames` decodes as video (lower case, with the dot).
+VIDEO_EXTENSIONS: frozenset[str] = _codecs.VIDEO_EXTENSIONS
+
+#: Extensions :class:`VideoWriter` can write.
+VIDEO_WRITE_EXTENSIONS: frozenset[str] = _codecs.VIDEO_WRITE_EXTENSIONS
 
 __all__ = [
     "IMAGE_EXTENSIONS",
