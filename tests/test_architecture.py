@@ -5,8 +5,9 @@ Every module under ``src/varflow`` is parsed with :mod:`ast`; each ``import`` an
 from the module to the imported module (relative imports resolved; for ``from X
 import y`` the target is ``X.y`` when that is a module of varflow, else ``X``; no
 implicit edges to parent packages).  The graph must have no cycle, only
-:mod:`varflow.cli` may import the CLI, and :mod:`varflow.io` keeps to readers and
-writers (no argparse, no CLI).
+:mod:`varflow.cli` may import the CLI, :mod:`varflow.io` keeps to readers and
+writers (no argparse, no CLI), and no module imports a private name (``_x``) of
+another package than its own or one of its subpackages.
 """
 
 from __future__ import annotations
@@ -138,21 +139,35 @@ def _private_imports(name: str) -> list[tuple[str, str, int]]:
             if a.name.startswith("_") and not a.name.startswith("__")]
 
 
-SOLVER_PACKAGES = ("varflow.ops", "varflow.twoframe", "varflow.multiframe")
+def _crosses_packages(name: str, target: str) -> bool:
+    """Whether a private name of ``target`` is out of bounds for module ``name``: a module
+    may import the private names of its own package and of its subpackages, never of
+    another package of varflow."""
+    package = name if MODULES[name][1] else name.rpartition(".")[0]
+    return (target.startswith("varflow.") or target == "varflow") and target != package \
+        and not target.startswith(package + ".")
 
 
-@pytest.mark.parametrize("name", [n for n in MODULES if n.startswith(SOLVER_PACKAGES)])
-def test_solvers_use_public_entry_points_across_packages(name: str) -> None:
-    """Issue 27: the multi-frame refinement is built from the two-frame machinery's
-    public entry points (the row kernels of :mod:`varflow.ops.primal_dual`, TV-L1's
-    ``data_channels``, the driver's ``run_levels``), not from another package's
-    private names."""
-    package = name.rpartition(".")[0] if not MODULES[name][1] else name
+@pytest.mark.parametrize("name", list(MODULES))
+def test_no_private_name_is_imported_across_packages(name: str) -> None:
+    """Issues 27 and 46: a package is used through the public names of its modules (the
+    multi-frame refinement through the two-frame machinery's public entry points, the
+    batch inputs through :func:`varflow.io.sequences.natural_key`, ...), never through
+    another package's private names."""
     bad = [f"{name}:{line} imports {target}.{attr}"
-           for target, attr, line in _private_imports(name)
-           if target.startswith("varflow.") and target != package
-           and not target.startswith(package + ".") and target.rpartition(".")[0] != package]
+           for target, attr, line in _private_imports(name) if _crosses_packages(name, target)]
     assert not bad, "\n".join(bad)
+
+
+def test_the_package_rule_sees_a_planted_crossing() -> None:
+    """The checker itself: a subpackage's privates are the package's own, a sibling's or a
+    parent's are another package's."""
+    assert not _crosses_packages("varflow.io.video_writer", "varflow.io._atomic")
+    assert not _crosses_packages("varflow.evaluation", "varflow.evaluation.bench.common")
+    assert _crosses_packages("varflow.batch.inputs", "varflow.io.sequences")
+    assert _crosses_packages("varflow.evaluation.bench.twoframe", "varflow.evaluation.datasets")
+    assert _crosses_packages("varflow.ops.median", "varflow")
+    assert not _crosses_packages("varflow.ops.median", "numpy")
 
 
 def test_the_private_import_checker_sees_a_planted_import() -> None:

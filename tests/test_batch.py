@@ -520,6 +520,7 @@ def _done_count(out: Path) -> int:
         return 0
 
 
+@pytest.mark.slow
 def test_sigkill_resume(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Kill the driver twice mid-run; the rerun completes with identical outputs."""
     vids = tmp_path / "vids"

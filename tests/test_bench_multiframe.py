@@ -467,6 +467,7 @@ def test_cli_on_real_rubberwhale(capsys: pytest.CaptureFixture[str], data_root: 
     assert 0 < aee < 0.5, row
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_rlr_defaults_on_rubberwhale(data_root: Path) -> None:
     """RubberWhale frame 11, full resolution and full iterations, default parameters.

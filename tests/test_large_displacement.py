@@ -214,6 +214,7 @@ def test_tracker_far_frames_follow_a_fast_object_with_matching():
     assert spread.max() < 1.0, spread
 
 
+@pytest.mark.slow
 def test_the_fit_gate_keeps_the_link_off_a_fast_object():
     """Issue 27: with tvl1's energy the link τ = 2 pulls the disc towards the clip's
     low-rank fit; the fit gate decouples the region the model does not hold.  Measured

@@ -10,7 +10,7 @@ from scipy.ndimage import map_coordinates
 
 pytest.importorskip("skimage")
 
-from varflow.generators import photo  # noqa: E402
+from varflow.generators import photo, photo_render, photo_scenes, photo_textures  # noqa: E402
 from varflow.generators.photo import (  # noqa: E402
     FAMILIES,
     PHOTOS,
@@ -275,7 +275,7 @@ def test_objects_occlude_and_leave(clips):
         assert any(leaving), family
         assert any(o["planned_crossing"] and o["leaves_frame"] for o in p["objects"])
         # background and objects come from different photographs
-        sources = [photo._source(n) for n in p["photos"]]
+        sources = [photo_textures.photo_source(n) for n in p["photos"]]
         assert len(set(sources)) == len(sources)
 
 
@@ -297,7 +297,7 @@ def test_trajectories_match_the_rendering(clips, family):
 def test_sampler_equals_map_coordinates():
     rng = np.random.default_rng(0)
     for name, tint in (("coffee", None), ("camera", np.array([1.05, 0.98, 0.97]))):
-        tex = photo._PhotoTexture(name, 3, (10.0, 20.0), 1.5, tint)
+        tex = photo_textures.PhotoTexture(name, 3, (10.0, 20.0), 1.5, tint)
         h, w = tex.shape
         coords = np.stack([rng.uniform(0, h - 1, 500), rng.uniform(0, w - 1, 500)])
         got = tex.sample(coords)[..., :3]
@@ -326,10 +326,10 @@ def _flat_render(layers, s: int) -> np.ndarray:
             return self(coords[0], coords[1])
 
     flat = [
-        photo._PhotoLayer(layer.motion, Flat(float(i > 0), 4), layer.shape)
+        photo_scenes.PhotoLayer(layer.motion, Flat(float(i > 0), 4), layer.shape)
         for i, layer in enumerate(layers)
     ]
-    return photo._render(flat, SHAPE, F, 3, s)[..., 0]
+    return photo_render.render(flat, SHAPE, F, 3, s)[..., 0]
 
 
 def test_antialiased_object_boundaries():
@@ -356,12 +356,12 @@ def test_antialiased_object_boundaries():
     # the same object area (to within the boundary pixels)
     assert abs(cov4.sum() - cov1.sum()) < 0.5 * edge.sum()
     # real rendering: at mixed pixels the value lies between the two layers' own renderings
-    frames = photo._render(layers, SHAPE, F, 3, 4)
-    back = photo._render(layers[:1], SHAPE, F, 3, 4)
+    frames = photo_render.render(layers, SHAPE, F, 3, 4)
+    back = photo_render.render(layers[:1], SHAPE, F, 3, 4)
     obj_only = []
     for i in range(1, len(layers)):
-        full = photo._PhotoLayer(layers[i].motion, layers[i].texture, None)
-        obj_only.append(photo._render([full], SHAPE, F, 3, 4))
+        full = photo_scenes.PhotoLayer(layers[i].motion, layers[i].texture, None)
+        obj_only.append(photo_render.render([full], SHAPE, F, 3, 4))
     # pixels mixing the background and exactly one object (no other object nearby)
     between = []
     for i, obj in enumerate(obj_only, start=1):
@@ -451,7 +451,7 @@ def test_suite_motion_bounds(monkeypatch):
     def no_render(layers, shape, n_frames, channels, s):  # the motion only
         return np.zeros((n_frames, *shape, channels), np.float32)
 
-    monkeypatch.setattr(photo, "_render", no_render)
+    monkeypatch.setattr(photo, "render", no_render)
     for split in SPLITS:
         for family, seed in photo_cases(split):
             p = make_photo_clip(family, seed=seed).params
@@ -501,7 +501,7 @@ def test_invalid_split_and_families():
 
 
 def test_missing_scikit_image(monkeypatch):
-    monkeypatch.setattr(photo, "_PHOTO_CACHE", {})
+    monkeypatch.setattr(photo_textures, "_PHOTO_CACHE", {})
     monkeypatch.setitem(sys.modules, "skimage", None)
     with pytest.raises(ImportError, match="pip install"):
         photo.load_photo("astronaut")

@@ -35,13 +35,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..io.video import (
-    IMAGE_EXTENSIONS,
-    VIDEO_EXTENSIONS,
-    _natural_key,
-    list_frame_files,
-    video_info,
-)
+from ..io.codecs import VIDEO_EXTENSIONS
+from ..io.probe import video_info
+from ..io.sequences import IMAGE_EXTENSIONS, list_frame_files, natural_key
 
 __all__ = ["BatchInput", "InputProbe", "LIST_EXTENSIONS", "expand_inputs", "probe_input"]
 
@@ -151,7 +147,7 @@ def _classify(path: Path, origin: str, name: str | None, strict: bool) -> list[B
 
 
 def _natural(paths: list[str]) -> list[str]:
-    return sorted(paths, key=_natural_key)
+    return sorted(paths, key=natural_key)
 
 
 def _expand_one(

@@ -142,7 +142,7 @@ def sha256_file(path: str | os.PathLike[str]) -> str:
 
 def _read(item: WorkItem) -> Any:
     """The task's frames, in the order of ``item.frames``."""
-    from varflow.io.video import read_frames
+    from varflow.io.sequences import read_frames
 
     if isinstance(item.source, tuple):  # frame folder: exactly the task's files
         frames = read_frames(list(item.source))

@@ -50,7 +50,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
     ``common`` and ``argv`` are).
     """
-    from ..evaluation.bench.multiframe import default_methods
+    from ..evaluation.bench.multiframe_run import default_methods
 
     params = _collect_params()
     tparams = _collect_params(TRACKERS)
@@ -157,7 +157,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     _add_param_flags(b, params, METHODS, chosen_methods(argv, METHODS))
     b.set_defaults(func=_cmd_bench_twoframe)
 
-    from ..evaluation.bench.multiframe import default_methods
+    from ..evaluation.bench.multiframe_run import default_methods
 
     mf_default = ",".join(default_methods())
     b = bsub.add_parser("middlebury-multiframe", parents=[common, bench_common],
@@ -177,7 +177,11 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     _add_param_flags(b, tparams, TRACKERS, chosen_methods(argv, TRACKERS))
     b.set_defaults(func=_cmd_bench_middlebury_multiframe)
 
-    from ..evaluation.bench.multiframe import PROTOCOL_METHODS, PROTOCOL_REFS, PROTOCOL_WINDOWS
+    from ..evaluation.bench.sintel_protocol import (
+        PROTOCOL_METHODS,
+        PROTOCOL_REFS,
+        PROTOCOL_WINDOWS,
+    )
 
     st_default = ",".join(m for m in PROTOCOL_METHODS if m.split(":")[0] in TRACKERS)
     b = bsub.add_parser("sintel-trajectories", parents=[common, bench_common],
@@ -492,13 +496,13 @@ def _cmd_bench_twoframe(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench.multiframe import (
-        format_multiframe_table,
+    from varflow.evaluation.bench.multiframe_data import sintel_snippets
+    from varflow.evaluation.bench.multiframe_run import (
         run_middlebury_multiframe,
         run_sintel_multiframe,
-        sintel_snippets,
     )
-    from varflow.evaluation.datasets import _HINT, data_root
+    from varflow.evaluation.bench.multiframe_tables import format_multiframe_table
+    from varflow.evaluation.datasets import DATA_HINT, data_root
 
     methods = _checked_methods(args.methods, get_tracker, "trajectory method")
     csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
@@ -510,7 +514,7 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
         if not snippets:
             raise FileNotFoundError(
                 f"no Sintel snippet with ground truth under {root / 'sintel' / 'training'}; "
-                f"{_HINT}"
+                f"{DATA_HINT}"
             )
     rows = run_middlebury_multiframe(methods, overrides, progress=not args.quiet, root=root)
     print(f"Middlebury RubberWhale frame07-frame14, reference frame10, scored on frame10 -> "
@@ -531,14 +535,16 @@ def _cmd_bench_middlebury_multiframe(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_sintel_trajectories(args: argparse.Namespace) -> int:
-    from varflow.evaluation.bench.multiframe import (
-        PROTOCOL_CLIP,
-        PROTOCOL_PASS,
+    from varflow.evaluation.bench.multiframe_data import load_rubberwhale_clip
+    from varflow.evaluation.bench.multiframe_run import run_middlebury_multiframe
+    from varflow.evaluation.bench.multiframe_tables import (
         format_multiframe_table,
         format_protocol_table,
-        load_rubberwhale_clip,
+    )
+    from varflow.evaluation.bench.sintel_protocol import (
+        PROTOCOL_CLIP,
+        PROTOCOL_PASS,
         plan_sintel_protocol,
-        run_middlebury_multiframe,
         run_sintel_trajectories,
         sintel_clip_numbers,
     )

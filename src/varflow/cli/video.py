@@ -121,7 +121,8 @@ def _pairs(frames: Iterator[np.ndarray]) -> Iterator[tuple[np.ndarray, np.ndarra
 
 def _cmd_video(args: argparse.Namespace) -> int:
     import varflow
-    from varflow.io.video import VideoReader, VideoWriter
+    from varflow.io.video_reader import VideoReader
+    from varflow.io.video_writer import VideoWriter
 
     method = get_method(args.method)
     out = _check_output(args.output, _OUTPUT_SUFFIXES, "-o/--output")

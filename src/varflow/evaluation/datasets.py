@@ -83,7 +83,8 @@ BOOK_REFERENCE_AEE: dict[str, dict[str, float]] = {
 
 SINTEL_PASSES: tuple[str, ...] = ("clean", "final")
 
-_HINT = f"pass --data DIR or set {ENV_VAR} to the folder holding middlebury/ and sintel/"
+#: How to point at the data, appended to the messages of a missing file.
+DATA_HINT = f"pass --data DIR or set {ENV_VAR} to the folder holding middlebury/ and sintel/"
 
 
 def _repo_root() -> Path:
@@ -120,9 +121,25 @@ def data_root(explicit: str | os.PathLike[str] | None = None) -> Path:
     return candidates[0].resolve()
 
 
-def _require(path: Path, what: str, root: Path) -> Path:
+def require_file(path: Path, what: str, root: Path) -> Path:
+    """``path``, checked to be a file.
+
+    Parameters
+    ----------
+    path : Path
+    what : str
+        What the file is, for the message (``"Middlebury Grove2 frame10"``).
+    root : Path
+        The data root, for the message.
+
+    Raises
+    ------
+    FileNotFoundError
+        When ``path`` is not a file; the message names it, the data root and
+        :data:`DATA_HINT`.
+    """
     if not path.is_file():
-        raise FileNotFoundError(f"{what} not found: {path} (data root {root}); {_HINT}")
+        raise FileNotFoundError(f"{what} not found: {path} (data root {root}); {DATA_HINT}")
     return path
 
 
@@ -143,7 +160,12 @@ def middlebury_sequence(name: str) -> str:
     )
 
 
-def _nan_unknown(flow: np.ndarray) -> np.ndarray:
+def nan_unknown(flow: np.ndarray) -> np.ndarray:
+    """A float32 copy of a ground-truth flow with unknown vectors NaN in both components.
+
+    Non-finite components and components larger than 1e9 in magnitude (the
+    Middlebury/Sintel "unknown" code) make the whole vector NaN.
+    """
     flow = np.array(flow, dtype=np.float32, copy=True)
     flow[~np.isfinite(flow) | (np.abs(flow) > 1e9)] = np.nan
     bad = np.isnan(flow).any(axis=2)
@@ -183,12 +205,13 @@ def load_middlebury_pair(
     seq = middlebury_sequence(seq)
     base = data_root(root)
     mb = base / "middlebury"
-    p0 = _require(mb / "other-data" / seq / "frame10.png", f"Middlebury {seq} frame10", base)
-    p1 = _require(mb / "other-data" / seq / "frame11.png", f"Middlebury {seq} frame11", base)
-    pf = _require(mb / "other-gt-flow" / seq / "flow10.flo", f"Middlebury {seq} ground truth", base)
-    f0 = _rgb(read_image(p0))
-    f1 = _rgb(read_image(p1))
-    gt = _nan_unknown(read_flo(pf))
+    p0 = require_file(mb / "other-data" / seq / "frame10.png", f"Middlebury {seq} frame10", base)
+    p1 = require_file(mb / "other-data" / seq / "frame11.png", f"Middlebury {seq} frame11", base)
+    pf = require_file(mb / "other-gt-flow" / seq / "flow10.flo", f"Middlebury {seq} ground truth",
+                      base)
+    f0 = to_rgb(read_image(p0))
+    f1 = to_rgb(read_image(p1))
+    gt = nan_unknown(read_flo(pf))
     if f0.shape != f1.shape or gt.shape[:2] != f0.shape[:2]:
         raise ValueError(
             f"Middlebury {seq}: inconsistent sizes {f0.shape}, {f1.shape}, flow {gt.shape}"
@@ -196,13 +219,19 @@ def load_middlebury_pair(
     return f0, f1, gt
 
 
-def _rgb(img: np.ndarray) -> np.ndarray:
+def to_rgb(img: np.ndarray) -> np.ndarray:
+    """An ``(H, W, 3)`` image: grey replicated to three channels, alpha dropped."""
     if img.ndim == 2:
         return np.repeat(img[:, :, None], 3, axis=2)
     return np.ascontiguousarray(img[:, :, :3])
 
 
-def _mask(path: Path) -> np.ndarray | None:
+def read_mask(path: Path) -> np.ndarray | None:
+    """A white-is-true mask image as a bool array ``(H, W)``; None when the file is missing.
+
+    Used for the Sintel ``occlusions`` and ``invalid`` masks; a pixel is True above
+    half the dtype's range (any channel).
+    """
     from ..io.images import read_image
 
     if not path.is_file():
@@ -261,11 +290,11 @@ def load_sintel_pair(
     tr = base / "sintel" / "training"
     n0, n1 = f"frame_{frame:04d}", f"frame_{frame + 1:04d}"
     what = f"Sintel {pass_}/{clip}"
-    f0 = _rgb(read_image(_require(tr / pass_ / clip / f"{n0}.png", f"{what} {n0}", base)))
-    f1 = _rgb(read_image(_require(tr / pass_ / clip / f"{n1}.png", f"{what} {n1}", base)))
-    gt = _nan_unknown(read_flo(_require(tr / "flow" / clip / f"{n0}.flo", f"{what} flow", base)))
-    occ = _mask(tr / "occlusions" / clip / f"{n0}.png")
-    inv = _mask(tr / "invalid" / clip / f"{n0}.png")
+    f0 = to_rgb(read_image(require_file(tr / pass_ / clip / f"{n0}.png", f"{what} {n0}", base)))
+    f1 = to_rgb(read_image(require_file(tr / pass_ / clip / f"{n1}.png", f"{what} {n1}", base)))
+    gt = nan_unknown(read_flo(require_file(tr / "flow" / clip / f"{n0}.flo", f"{what} flow", base)))
+    occ = read_mask(tr / "occlusions" / clip / f"{n0}.png")
+    inv = read_mask(tr / "invalid" / clip / f"{n0}.png")
     return f0, f1, gt, occ, inv
 
 

@@ -41,16 +41,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..ops.warp import in_bounds
-from .photo import (
-    _affine_camera,
-    _background_extent,
-    _background_texture,
-    _objects,
-    _PhotoLayer,
-    _render,
-    split_cases,
-)
+from .photo import split_cases
 from .photo_pairs import PhotoPair, _affine_matrix
+from .photo_render import render
+from .photo_scenes import PhotoLayer, affine_camera, background_extent, photo_objects
+from .photo_textures import background_texture
 from .sequences import _check_int, _trajectories
 
 __all__ = [
@@ -147,15 +142,15 @@ def make_large_pair(
     bg_range = CAMERA_MOTION_RANGE if family == "camera" else BACKGROUND_MOTION_RANGE
     bg_motion = float(rng.uniform(*bg_range))
     obj_motion = float(rng.uniform(*OBJECT_MOTION_RANGE))
-    motion, motion_info = _affine_camera(rng, (h, w), _TIMES, bg_motion)
-    extent = _background_extent(motion, (h, w), 2)
-    texture, bg_info = _background_texture(rng, extent, channels)
+    motion, motion_info = affine_camera(rng, (h, w), _TIMES, bg_motion)
+    extent = background_extent(motion, (h, w), 2)
+    texture, bg_info = background_texture(rng, extent, channels)
     # object paths are calibrated from mid-time: half the displacement each way; the
     # speed cap is lifted (two frames: only the displacement matters)
-    objs, infos = _objects(rng, (h, w), _TIMES, 0.5 * obj_motion, 1e9, channels,
-                           [texture.name])
-    layers = [_PhotoLayer(motion, texture), *objs]
-    clean = _render(layers, (h, w), 2, channels, supersample)
+    objs, infos = photo_objects(rng, (h, w), _TIMES, 0.5 * obj_motion, 1e9, channels,
+                                [texture.name])
+    layers = [PhotoLayer(motion, texture), *objs]
+    clean = render(layers, (h, w), 2, channels, supersample)
     traj, vis, owner = _trajectories(layers, (h, w), 2, 0)
     flow = np.ascontiguousarray(traj[1])
     valid = np.ascontiguousarray(vis[1])
@@ -234,7 +229,7 @@ def fast_object_clip(
     n_frames = _check_int(n_frames, "n_frames", 2)
     if n_frames > 7:
         raise ValueError(f"n_frames: must be <= 7 (the disc leaves the frame), got {n_frames}")
-    from .photo import load_photo
+    from .photo_textures import load_photo
 
     def as_uint8(img: np.ndarray) -> np.ndarray:
         return np.round(img * np.float32(255)).astype(np.uint8)

@@ -101,23 +101,17 @@ import numpy as np
 from scipy.ndimage import convolve, gaussian_filter
 
 from ..ops.warp import in_bounds
-from .photo import (
-    _MAX_SPEED,
-    REPORTING_SEEDS,
-    SPLITS,
-    TUNING_SEEDS,
-    _add_noise,
-    _affine_camera,
-    _background_extent,
-    _background_texture,
-    _illuminate,
-    _objects,
-    _PhotoLayer,
-    _PhotoTexture,
-    _render,
-    _wave_sheet,
-    split_cases,
+from .photo import REPORTING_SEEDS, SPLITS, TUNING_SEEDS, split_cases
+from .photo_render import add_noise, illuminate, render
+from .photo_scenes import (
+    MAX_SPEED,
+    PhotoLayer,
+    affine_camera,
+    background_extent,
+    photo_objects,
+    wave_sheet,
 )
+from .photo_textures import PhotoTexture, background_texture
 from .sequences import _AffineMotion, _calibrate, _check_float, _check_int, _trajectories
 
 __all__ = [
@@ -227,8 +221,8 @@ class _HomographyMotion:
         return self._apply(self.hinv[n], qx, qy)
 
 
-class _ProjectiveTexture(_PhotoTexture):
-    """A :class:`~varflow.generators.photo._PhotoTexture` for a projective background.
+class _ProjectiveTexture(PhotoTexture):
+    """A :class:`~varflow.generators.photo_textures.PhotoTexture` for a projective background.
 
     The renderer of :mod:`varflow.generators.photo` asks the background texture for
     the photo coordinates of the sub-sample grid through ``affine_coords``; here they
@@ -469,34 +463,34 @@ def make_photo_pair(
     motion: Any
     camera: dict[str, Any] | None = None
     if family == "nonrigid":
-        motion, params["motion"] = _wave_sheet(rng, (h, w), _TIMES, magnitude)
+        motion, params["motion"] = wave_sheet(rng, (h, w), _TIMES, magnitude)
     elif family == "homography":
         motion, params["motion"] = _homography_camera(rng, (h, w), magnitude)
         camera = {"kind": "homography", "matrix": params["motion"]["matrix"]}
     else:
-        motion, params["motion"] = _affine_camera(rng, (h, w), _TIMES, magnitude)
+        motion, params["motion"] = affine_camera(rng, (h, w), _TIMES, magnitude)
         camera = {"kind": "affine", "matrix": _affine_matrix(motion)}
     params["camera"] = camera
-    extent = _background_extent(motion, (h, w), 2)
-    texture, bg_info = _background_texture(rng, extent, channels)
+    extent = background_extent(motion, (h, w), 2)
+    texture, bg_info = background_texture(rng, extent, channels)
     if family == "homography":
         texture = _ProjectiveTexture(
             texture.name, channels, texture.origin, texture.scale, texture.tint
         )
     params["background"] = {**bg_info, "extent": extent}
     params["photo_scale"] = bg_info["photo_scale"]
-    layers = [_PhotoLayer(motion, texture)]
+    layers = [PhotoLayer(motion, texture)]
     params["objects"] = []
     if family == "objects":
         # the object paths are calibrated from mid-time: half the magnitude each way
-        objs, infos = _objects(
-            rng, (h, w), _TIMES, 0.5 * magnitude, _MAX_SPEED, channels, [texture.name]
+        objs, infos = photo_objects(
+            rng, (h, w), _TIMES, 0.5 * magnitude, MAX_SPEED, channels, [texture.name]
         )
         layers += objs
         params["objects"] = infos
     params["photos"] = [layer.texture.name for layer in layers]
 
-    clean = _render(layers, (h, w), 2, channels, supersample)
+    clean = render(layers, (h, w), 2, channels, supersample)
     params["supersample"] = supersample
     traj, vis, owner = _trajectories(layers, (h, w), 2, 0)
     flow = np.ascontiguousarray(traj[1])
@@ -507,10 +501,10 @@ def make_photo_pair(
     params["noise"] = None
     params["blur"] = None
     if family == "illumination":
-        frames, params["illumination"] = _illuminate(rng, clean, _TIMES)
+        frames, params["illumination"] = illuminate(rng, clean, _TIMES)
     elif family == "noise":
         sigma = float(rng.uniform(*NOISE_SIGMA_RANGE))
-        frames, params["noise"] = _add_noise(noise_rng, clean, sigma)
+        frames, params["noise"] = add_noise(noise_rng, clean, sigma)
     elif family == "blur":
         frames, params["blur"] = _blur(rng, clean, flow)
 

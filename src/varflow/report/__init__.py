@@ -8,7 +8,10 @@ JavaScript and no external request.
 * :mod:`varflow.report.sources` loads the inputs,
 * :mod:`varflow.report.figures` makes the images,
 * :mod:`varflow.report.html` assembles the page,
-* :mod:`varflow.report.build` decides the content;
+* :mod:`varflow.report.batch`, :mod:`varflow.report.flows`,
+  :mod:`varflow.report.trajectories` and :mod:`varflow.report.bench` decide the content
+  of each kind of input (on the shared pieces of :mod:`varflow.report.common`),
+* :mod:`varflow.report.build` is the entry point;
 
 the ``varflow report`` sub-command is :mod:`varflow.cli.report`.
 """

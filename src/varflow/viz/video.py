@@ -332,7 +332,7 @@ def write_flow_video(
     float
         The colour scale used.
     """
-    from ..io.video import write_video
+    from ..io.video_writer import write_video
 
     fl = np.asarray(flows)
     if fl.ndim != 4 or fl.shape[3] != 2 or fl.shape[0] < 1:

@@ -18,5 +18,7 @@ trajectories
     (``varflow bench trajectories``).
 multiframe
     Trajectory methods scored on Middlebury RubberWhale and MPI-Sintel
-    (``varflow bench middlebury-multiframe`` and ``sintel-trajectories``).
+    (``varflow bench middlebury-multiframe`` and ``sintel-trajectories``): the
+    public home of the names of multiframe_data (loaders), multiframe_run (the runs),
+    multiframe_tables (the tables) and sintel_protocol (the book's Table 4.1 protocol).
 """

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from ...generators.photo import _MAX_FRAMES as _PHOTO_MAX_FRAMES
-from ...generators.photo import _MIN_SIZE as _PHOTO_MIN_SIZE
 from ...generators.photo import FAMILIES, SPLITS, make_photo_clip, photo_cases
+from ...generators.photo import MAX_FRAMES as _PHOTO_MAX_FRAMES
+from ...generators.photo import MIN_SIZE as _PHOTO_MIN_SIZE
 from ...generators.sequences import SCENES, VARIANTS, benchmark_suite
 from ...registry import TRACKERS, get_tracker, make_track_params
 from ..trajectory_metrics import occlusion_accuracy, trajectory_errors

@@ -61,7 +61,7 @@ from ...generators.photo_pairs import SPLITS as PHOTO_SPLITS
 from ...generators.photo_pairs import make_photo_pair, photo_pair_cases
 from ...registry import get_method, make_params
 from ..datasets import (
-    _HINT,
+    DATA_HINT,
     MIDDLEBURY_SEQUENCES,
     data_root,
     load_middlebury_pair,
@@ -409,7 +409,7 @@ def check_twoframe_data(
     """
     base = data_root(root)
     if "middlebury" in sets and not (base / "middlebury").is_dir():
-        raise FileNotFoundError(f"Middlebury data not found under {base}; {_HINT}")
+        raise FileNotFoundError(f"Middlebury data not found under {base}; {DATA_HINT}")
     missing_all: list[tuple[str, str, int]] = []
     for name, label, pairs in (("sintel", "Sintel", SINTEL_PAIRS),
                                ("sintel-large", "large-motion Sintel", SINTEL_LARGE_PAIRS)):
@@ -419,7 +419,7 @@ def check_twoframe_data(
         if not present:
             raise FileNotFoundError(
                 f"none of the {label} pairs found under {base / 'sintel' / 'training'}; "
-                f"{_HINT}"
+                f"{DATA_HINT}"
             )
         missing_all += [m for m in missing if m not in missing_all]
     return missing_all
