@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import itertools
 
+import numba as nb
 import numpy as np
+
+from .._jit import FASTMATH
 
 __all__ = [
     "soft_threshold",
@@ -30,9 +33,19 @@ __all__ = [
     "prox_huber_norm",
     "prox_huber_conjugate",
     "prox_linear_l1",
+    "prox_linear_l1_pixel_step",
     "prox_linear_l1_exact",
     "linear_l1_energy",
+    "EPS_GRAD",
+    "data_prox_row",
+    "data_prox_row_pixel_step",
 ]
+
+# float32 constants: Python float literals would make Numba compute in float64
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+#: Squared gradient norm below which a linear-L1 term has no gradient (its dual is 0).
+EPS_GRAD = np.float32(1e-12)
 
 
 def soft_threshold(x: np.ndarray, t: float | np.ndarray) -> np.ndarray:
@@ -152,6 +165,51 @@ def prox_linear_l1(u, a, gx, gy, t, n_sweeps=1, q0=None):
     return np.stack([d0, d1], -1).astype(np.float32), q
 
 
+def prox_linear_l1_pixel_step(z, a, gx, gy, t, q, n_sweeps=1):
+    """:func:`prox_linear_l1` on planar arrays, with a step per pixel and the duals in place.
+
+    The NumPy reference of :func:`data_prox_row_pixel_step` (and so of
+    :func:`~varflow.twoframe.sparse.sparse_pd_iterations`' point-wise step, whose
+    reference :func:`~varflow.twoframe.sparse.sparse_pd_iterations_numpy` calls it).
+    Apart from :func:`prox_linear_l1` because it differs in the last bits: the terms
+    are planar ``(C, H, W)`` (sums over the first axis), a term counts as having a
+    gradient when ``|g_c|² ≥ 1e-12`` (as in the Numba kernels; :func:`prox_linear_l1`
+    asks for ``> 1e-12``) and ``q`` is updated in place.
+
+    Parameters
+    ----------
+    z : sequence of two ndarray, shape (H, W), float32
+        The prox centre ``(z_1, z_2)``.
+    a, gx, gy : ndarray, shape (C, H, W), float32
+        Terms ``|a_c + gx_c d_1 + gy_c d_2|``.
+    t : float or ndarray, shape (H, W), float32
+        Step, per pixel.
+    q : ndarray, shape (C, H, W), float32
+        Warm start of the duals in [-1, 1], updated in place.
+    n_sweeps : int
+        Coordinate-descent sweeps over the channels.
+
+    Returns
+    -------
+    d0, d1 : ndarray, shape (H, W), float32
+        The two components of the prox.
+    """
+    nn = gx * gx + gy * gy
+    safe = nn >= 1e-12
+    inv = np.where(safe, 1.0 / (t * np.where(safe, nn, 1.0)), 0.0).astype(np.float32)
+    d0 = z[0] - t * (q * gx).sum(0)
+    d1 = z[1] - t * (q * gy).sum(0)
+    for _ in range(n_sweeps):
+        for c in range(a.shape[0]):
+            e0 = d0 + t * q[c] * gx[c]
+            e1 = d1 + t * q[c] * gy[c]
+            qn = np.clip((a[c] + gx[c] * e0 + gy[c] * e1) * inv[c], -1.0, 1.0)
+            q[c] = qn
+            d0 = e0 - t * qn * gx[c]
+            d1 = e1 - t * qn * gy[c]
+    return d0, d1
+
+
 def prox_linear_l1_exact(u, a, gx, gy, t):
     """Exact prox of the linearised L1 data term by enumerating faces (for tests).
 
@@ -195,3 +253,81 @@ def prox_linear_l1_exact(u, a, gx, gy, t):
     energies = linear_l1_energy(cands, u[None], a[None], gx[None], gy[None], t)
     best = np.argmin(energies, axis=0)
     return np.take_along_axis(cands, best[None, ..., None], 0)[0]
+
+
+# ------------------------------------------------- Numba row kernels (dual descent)
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
+    """Prox of the linearised colour L1 term for row ``i`` (in place on d1, d2, q).
+
+    Dual coordinate descent over the channels (see :func:`varflow.ops.prox.prox_linear_l1`);
+    on entry ``d = u``; on exit ``d = u - t Σ_c q_c ∇I_c``.
+    """
+    nc = a.shape[0]
+    w = a.shape[2]
+    for c in range(nc):
+        gxr = ix[c, i]
+        gyr = iy[c, i]
+        qr = q[c, i]
+        for j in range(w):
+            qv = t * qr[j]
+            d1[j] -= qv * gxr[j]
+            d2[j] -= qv * gyr[j]
+    for _s in range(n_sweeps):
+        for c in range(nc):
+            gxr = ix[c, i]
+            gyr = iy[c, i]
+            ar = a[c, i]
+            qr = q[c, i]
+            for j in range(w):
+                gx = gxr[j]
+                gy = gyr[j]
+                qo = t * qr[j]
+                e1 = d1[j] + qo * gx
+                e2 = d2[j] + qo * gy
+                nn = gx * gx + gy * gy
+                r = ar[j] + gx * e1 + gy * e2
+                qn = r / (t * nn) if nn >= EPS_GRAD else _F0
+                qn = min(max(qn, -_F1), _F1)
+                qr[j] = qn
+                d1[j] = e1 - t * qn * gx
+                d2[j] = e2 - t * qn * gy
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def data_prox_row_pixel_step(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
+    """:func:`varflow.ops.primal_dual.data_prox_row` with a per-pixel step ``tr[j]``.
+
+    In place on ``d1, d2`` (on entry the prox centre, on exit
+    ``d - t Σ_c q_c ∇I_c``) and on the row ``i`` of ``q``.
+    """
+    nc = a.shape[0]
+    w = a.shape[2]
+    for c in range(nc):
+        gxr = ix[c, i]
+        gyr = iy[c, i]
+        qr = q[c, i]
+        for j in range(w):
+            qv = tr[j] * qr[j]
+            d1[j] -= qv * gxr[j]
+            d2[j] -= qv * gyr[j]
+    for _s in range(n_sweeps):
+        for c in range(nc):
+            gxr = ix[c, i]
+            gyr = iy[c, i]
+            ar = a[c, i]
+            qr = q[c, i]
+            for j in range(w):
+                gx = gxr[j]
+                gy = gyr[j]
+                t = tr[j]
+                qo = t * qr[j]
+                e1 = d1[j] + qo * gx
+                e2 = d2[j] + qo * gy
+                nn = gx * gx + gy * gy
+                r = ar[j] + gx * e1 + gy * e2
+                qn = r / (t * nn) if nn >= EPS_GRAD else _F0
+                qn = min(max(qn, -_F1), _F1)
+                qr[j] = qn
+                d1[j] = e1 - t * qn * gx
+                d2[j] = e2 - t * qn * gy
