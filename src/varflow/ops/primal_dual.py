@@ -3,7 +3,7 @@
 The building blocks that every solver of the TV-L1 family composes into its
 iteration kernel: :func:`varflow.twoframe.tvl1.tvl1_iterations` (two-frame TV-L1
 and its tensor-directed variant), :mod:`varflow.twoframe.sparse` (the combined
-sparse energy) and :func:`varflow.multiframe.rlr.ustep_iterations` (the U-step of
+sparse energy) and :func:`varflow.multiframe.ustep.ustep_iterations` (the U-step of
 the multi-frame methods).  Each works on one image row of planar ``(K, H, W)``
 float32 arrays, in place, so that a solver sweeps rows in parallel blocks
 (:func:`row_blocks`) and keeps the data of a row in cache for several updates.
