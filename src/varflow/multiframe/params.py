@@ -20,13 +20,13 @@ from .propagate import DEFAULT_REPAIR_COST, REPAIR_COSTS
 from .track import FlowTrackParams
 from .visibility import VisibilityParams
 
+__all__ = ["TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams", "RLRParams"]
+
 #: Offsets (pixels) of the final repair.  Tuning split of the photographic clips,
 #: mean EPE / occlusion accuracy: (2, 4, 8) 0.874 / 0.966, (2, 4) 0.861 / 0.967,
 #: (4,) 0.860 / 0.966 (objects 0.732 → 0.745, illumination 2.93 → 2.84) at a third
 #: of the cost of three distances.
 FINAL_REPAIR_DISTANCES = (4,)
-
-__all__ = ["TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams", "RLRParams"]
 
 #: The default two-frame energy of the multi-frame methods (issue 27): ``tvl1``'s data
 #: term and regulariser — the grey channel, λ_D = 15 with gradient constancy γ = 140,
