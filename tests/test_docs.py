@@ -84,7 +84,7 @@ def test_api_page_lists_the_public_names() -> None:
         assert name in varflow.__all__ and f"   {name}\n" in page
     for name in video.__all__:
         assert f"   {name}\n" in page
-    for cls in ("varflow.twoframe.tvl1.TVL1Params", "varflow.multiframe.rlr.RLRParams",
+    for cls in ("varflow.twoframe.tvl1.TVL1Params", "varflow.multiframe.params.RLRParams",
                 "varflow.retime.splatting.SplatParams"):
         assert f"   {cls}\n" in page
 

@@ -8,13 +8,9 @@ from varflow.evaluation.trajectory_metrics import trajectory_errors
 from varflow.generators.sequences import make_sequence
 from varflow.multiframe.lowrank import trajectories_to_matrix
 from varflow.multiframe.mfsf import MFSFParams, dct_basis, pca_basis, track_mfsf
-from varflow.multiframe.rlr import (
-    link_channels,
-    track_rlr,
-    ustep_iterations,
-    ustep_iterations_numpy,
-)
+from varflow.multiframe.rlr import track_rlr
 from varflow.multiframe.track import check_frames
+from varflow.multiframe.ustep import link_channels, ustep_iterations, ustep_iterations_numpy
 from varflow.ops.primal_dual import row_blocks
 from varflow.registry import make_track_params
 from varflow.twoframe.tvl1 import PlainTVL1Params

@@ -1,4 +1,6 @@
-"""Robust Low-Rank trajectories: the U-step kernels, the exact prox, the driver."""
+"""Robust Low-Rank trajectories: the U-step kernels, the driver, the fusion, the method.
+
+The exact point-wise prox is tested in ``test_prox.py``."""
 
 import dataclasses
 
@@ -8,23 +10,13 @@ import pytest
 import varflow
 from varflow.evaluation.trajectory_metrics import trajectory_errors
 from varflow.generators.sequences import make_sequence
-from varflow.multiframe.rlr import (
-    Coupling,
-    RLRParams,
-    adjacent_factor,
-    fit_gate,
-    link_channels,
-    prox_certified,
-    prox_faces,
-    refine_trajectories,
-    track_rlr,
-    ustep_iterations,
-    ustep_iterations_numpy,
-)
+from varflow.multiframe.params import RLRParams
+from varflow.multiframe.refine import Coupling, fit_gate, refine_trajectories
+from varflow.multiframe.rlr import adjacent_factor, track_rlr
 from varflow.multiframe.track import check_frames
+from varflow.multiframe.ustep import link_channels, ustep_iterations, ustep_iterations_numpy
 from varflow.ops.differences import gradient
 from varflow.ops.primal_dual import row_blocks
-from varflow.ops.prox import linear_l1_energy, prox_linear_l1_exact
 from varflow.registry import make_track_params
 from varflow.twoframe.tvl1 import tvl1_iterations
 
@@ -39,77 +31,6 @@ def _terms(h, w, c, link=True, seed=0):
     a = (0.1 * rng.normal(size=(c, h, w))).astype(np.float32)
     lk = rng.normal(size=(2, h, w)).astype(np.float32) if link else None
     return link_channels(ix, iy, a, lk, 0.05)
-
-
-@pytest.mark.parametrize("c", [1, 3])
-def test_prox_faces_matches_numpy_enumeration(c):
-    h, w = 6, 7
-    ix, iy, a = _terms(h, w, c, seed=c)
-    u = RNG.normal(size=(2, h, w)).astype(np.float32)
-    t = 0.7
-    got = prox_faces(u, a, ix, iy, t)
-    hw = lambda x: np.moveaxis(x, 0, -1)  # noqa: E731
-    ref = prox_linear_l1_exact(hw(u), hw(a), hw(ix), hw(iy), t)
-    np.testing.assert_allclose(hw(got), ref, atol=2e-5)
-    # and it is the minimiser: random perturbations never lower the energy
-    e0 = linear_l1_energy(ref, hw(u), hw(a), hw(ix), hw(iy), t)
-    for _ in range(20):
-        d = ref + 1e-3 * RNG.normal(size=ref.shape)
-        assert np.all(linear_l1_energy(d, hw(u), hw(a), hw(ix), hw(iy), t) >= e0 - 1e-9)
-
-
-def _degenerate_terms(h, w, seed):
-    """Colour-like terms with the hard cases mixed in: a channel without gradient,
-    two channels with parallel gradients, and three lines through one point."""
-    ix, iy, a = _terms(h, w, 3, seed=seed)
-    ix, iy, a = ix.copy(), iy.copy(), a.copy()
-    ix[0, ::3], iy[0, ::3] = 0.0, 0.0  # constant term
-    ix[1, 1::3], iy[1, 1::3] = 2 * ix[2, 1::3], 2 * iy[2, 1::3]  # parallel lines
-    a[1, 1::3] = 2 * a[2, 1::3]  # ... and coincident
-    # lines of channels 0 and 1 through the crossing of the two link lines
-    for c in (0, 1):
-        sl = (c, slice(2, None, 3))
-        a[sl] = -(ix[sl] * (-a[3, 2::3] / ix[3, 2::3]) + iy[sl] * (-a[4, 2::3] / iy[4, 2::3]))
-    return ix, iy, a
-
-
-@pytest.mark.parametrize("c", [1, 3])
-@pytest.mark.parametrize("t", [0.05, 0.7, 5.0])
-def test_certified_prox_equals_the_enumeration(c, t):
-    h, w = 24, 30
-    rng = np.random.default_rng(20 + c)
-    ix, iy, a = _terms(h, w, c, seed=10 + c)
-    u = rng.normal(size=(2, h, w)).astype(np.float32)
-    ref = prox_faces(u, a, ix, iy, t)
-    v, q, _ = prox_certified(u, a, ix, iy, t)  # cold start
-    np.testing.assert_allclose(v, ref, atol=1e-5)
-    assert np.all(np.abs(q) <= 1)
-    # from its own duals every pixel certifies at once, with the same point
-    v2, _, n_warm = prox_certified(u, a, ix, iy, t, q=q, n_sweeps=0)
-    assert n_warm == 0
-    np.testing.assert_allclose(v2, ref, atol=1e-5)
-    # wrong duals never give a wrong point: they fall back or certify the true one
-    bad = np.sign(rng.uniform(-1, 1, size=q.shape)).astype(np.float32)
-    v3, _, n_bad = prox_certified(u, a, ix, iy, t, q=bad, n_sweeps=0)
-    assert n_bad > 0
-    np.testing.assert_allclose(v3, ref, atol=1e-5)
-
-
-def test_certified_prox_on_degenerate_terms():
-    h, w = 18, 21
-    ix, iy, a = _degenerate_terms(h, w, seed=3)
-    hw = lambda x: np.moveaxis(x, 0, -1)  # noqa: E731
-    rng = np.random.default_rng(5)
-    for t in (0.1, 1.0):
-        u = rng.normal(size=(2, h, w)).astype(np.float32)
-        ref = prox_faces(u, a, ix, iy, t)
-        v, _, n_fall = prox_certified(u, a, ix, iy, t, n_sweeps=3)
-        assert n_fall > 0  # the hard pixels do reach the enumeration
-        # the energy is strongly convex: one minimiser, whatever the degeneracy
-        np.testing.assert_allclose(v, ref, atol=1e-5)
-        e_ref = linear_l1_energy(hw(ref), hw(u), hw(a), hw(ix), hw(iy), t)
-        e_v = linear_l1_energy(hw(v), hw(u), hw(a), hw(ix), hw(iy), t)
-        assert np.all(e_v <= e_ref + 1e-6)
 
 
 @pytest.mark.parametrize("exact, huber, theta", [(False, 0.0, 0.0), (True, 0.0, 0.0),
@@ -400,7 +321,7 @@ def test_invalid_energy_fields_name_the_field(field, value):
 
 
 def test_the_energy_is_composed():
-    from varflow.multiframe.rlr import TVL1_ENERGY
+    from varflow.multiframe.params import TVL1_ENERGY
     from varflow.twoframe.large_displacement import LargeDisplacementParams
     from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
 
@@ -434,7 +355,7 @@ def test_a_brightness_ramp_is_tracked_as_well_as_by_tvl1_on_its_pairs():
     offset drift, as tvl1 is.  Measured (2026-12-02): rlr with TVL1_ENERGY 0.0604 px,
     twoframe (tvl1 from the reference to every frame) 0.0706; rlr on the default plain
     energy 0.325 and twoframe on it 0.512 (the colour term follows the brightness)."""
-    from varflow.multiframe.rlr import TVL1_ENERGY
+    from varflow.multiframe.params import TVL1_ENERGY
 
     s = make_sequence("affine", n_frames=9, shape=(64, 80), magnitude=3.0, seed=5)
     frames = s.frames.copy()
@@ -486,7 +407,7 @@ def test_fusion_takes_the_decoupled_displacement_where_the_data_say_so():
     is right; the fused field is the decoupled one in the square and the coupled one
     (equal to it elsewhere) outside; a margin above any cost keeps the coupled field."""
     from varflow.generators.pairs import synthetic_pair
-    from varflow.multiframe.rlr import fuse_decoupled
+    from varflow.multiframe.fuse import fuse_decoupled
 
     f0, f1, gt = synthetic_pair("translation", shape=(64, 80), magnitude=2.0, channels=3,
                                 seed=3)
@@ -519,7 +440,7 @@ def test_fusion_evidence_lets_a_flat_region_follow_its_textured_surroundings():
     two apart, and takes the decoupled field.  Where both fields agree nothing moves."""
     from scipy.ndimage import gaussian_filter
 
-    from varflow.multiframe.rlr import fuse_decoupled, regional_evidence, texture_mask
+    from varflow.multiframe.fuse import fuse_decoupled, regional_evidence, texture_mask
 
     rng = np.random.default_rng(5)
     tex = gaussian_filter(rng.random((72, 96, 3)), (1.5, 1.5, 0)).astype(np.float32)
@@ -567,7 +488,7 @@ def test_soft_fusion_blends_the_two_refinements_near_the_margin():
     where it cannot (a flat band, equal costs) the logistic's value at a cost
     advantage of 0, 1 / (1 + exp(1/κ)); a narrow blend tends to the hard choice."""
     from varflow.generators.pairs import synthetic_pair
-    from varflow.multiframe.rlr import fuse_decoupled
+    from varflow.multiframe.fuse import fuse_decoupled
 
     f0, f1, gt = synthetic_pair("translation", shape=(64, 80), magnitude=2.0, channels=3,
                                 seed=3)
@@ -627,3 +548,29 @@ def test_rlr_fuses_its_linked_and_its_decoupled_refinement(small_seq):
     assert np.any(np.all(soft != linked, axis=-1) & np.all(soft != free, axis=-1))
     assert [d for d, _ in ticks] == list(range(1, len(ticks) + 1))  # one bar, no restart
     assert all(t == ticks[-1][1] for _, t in ticks) and ticks[-1][0] == ticks[-1][1]
+
+
+def test_the_names_that_moved_out_of_rlr_stay_importable_from_it():
+    # issue 46 split rlr.py by stage; what users imported from it still imports, and is
+    # the object of its new home
+    import varflow.multiframe.fuse as fuse
+    import varflow.multiframe.params as params
+    import varflow.multiframe.refine as refine
+    import varflow.multiframe.rlr as rlr
+    import varflow.multiframe.ustep as ustep
+    import varflow.ops.prox as prox
+
+    homes = {params: ("TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams",
+                      "RLRParams"),
+             refine: ("Coupling", "initial_trajectories", "refine_trajectories",
+                      "refinement_warps", "clip_noise_rule", "fit_gate"),
+             fuse: ("fuse_decoupled", "regional_evidence", "texture_mask"),
+             ustep: ("ustep_iterations", "ustep_iterations_numpy", "link_channels",
+                     "set_link_targets"),
+             prox: ("prox_faces", "prox_certified")}
+    for home, names in homes.items():
+        for name in names:
+            assert name in rlr.__all__ and name in home.__all__, name
+            assert getattr(rlr, name) is getattr(home, name), name
+    moved = {n for names in homes.values() for n in names}
+    assert set(rlr.__all__) == moved | {"track_rlr", "adjacent_factor", "residual_noise"}

@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 import varflow
-from varflow.multiframe.rlr import RLRParams
+from varflow.multiframe.params import RLRParams
 from varflow.ops.median import (
     flow_edge_mask,
     flow_edge_mask_numpy,

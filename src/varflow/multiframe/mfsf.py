@@ -8,7 +8,7 @@ Trajectories are kept near a subspace spanned by ``2R`` fixed basis trajectories
 
 with the same data and TV terms as RLR (:mod:`varflow.multiframe.rlr`).  It is
 minimised by alternation in the same multi-frame driver
-(:func:`varflow.multiframe.rlr.refine_trajectories`): the Q-step is the least-squares
+(:func:`varflow.multiframe.refine.refine_trajectories`): the Q-step is the least-squares
 fit ``Q = P⁺ U`` over the frames other than the reference (whose displacement is
 zero by definition), and the U-step is RLR's per-frame primal-dual iteration with
 the quadratic folded into the point-wise prox.
@@ -34,7 +34,8 @@ import numpy as np
 
 from .._validate import check_field as _check
 from .lowrank import matrix_to_trajectories, trajectories_to_matrix
-from .rlr import Coupling, MultiFrameParams, refine_trajectories
+from .params import MultiFrameParams
+from .refine import Coupling, refine_trajectories
 from .track import TrackCallback
 
 __all__ = ["MFSFParams", "dct_basis", "pca_basis", "track_mfsf"]
@@ -42,7 +43,7 @@ __all__ = ["MFSFParams", "dct_basis", "pca_basis", "track_mfsf"]
 
 @dataclass(frozen=True)
 class MFSFParams(MultiFrameParams):
-    """Parameters of MFSF (and those of :class:`~varflow.multiframe.rlr.MultiFrameParams`).
+    """Parameters of MFSF (and those of :class:`~varflow.multiframe.params.MultiFrameParams`).
 
     Attributes
     ----------
@@ -120,7 +121,7 @@ def track_mfsf(frames: np.ndarray, ref: int, params: MFSFParams,
                stats: dict | None = None) -> np.ndarray:
     """MFSF trajectories (see the module docstring).
 
-    Arguments as in :func:`varflow.multiframe.rlr.refine_trajectories`.
+    Arguments as in :func:`varflow.multiframe.refine.refine_trajectories`.
 
     Returns
     -------

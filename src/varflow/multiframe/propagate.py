@@ -93,7 +93,7 @@ log = logging.getLogger(__name__)
 #: The residuals a repair can compare (:func:`varflow.ops.fusion.repair_with`).
 REPAIR_COSTS: tuple[str, ...] = ("colour", "relit", "census")
 #: The default of :func:`propagate_trajectories` and of
-#: :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_cost` (one value for both).
+#: :attr:`varflow.multiframe.params.MultiFrameParams.repair_cost` (one value for both).
 DEFAULT_REPAIR_COST = "relit"
 
 
@@ -173,12 +173,12 @@ def propagate_trajectories(
         pyramid, not from a propagated neighbour, so no band has grown along the
         object edges, and on real footage the photometric cost of the repair is
         less reliable than the flow (see
-        :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_adjacent`).
+        :attr:`varflow.multiframe.params.MultiFrameParams.repair_adjacent`).
     repair_cost : {"colour", "relit", "census"}
         Residual of the repair's cost (:func:`varflow.ops.fusion.repair_with`): the
         frames' colours, the colours with the reference relit to the other frame's
         light, or their soft census planes.  Default "relit" (see
-        :attr:`varflow.multiframe.rlr.MultiFrameParams.repair_cost`).
+        :attr:`varflow.multiframe.params.MultiFrameParams.repair_cost`).
     support_radius, support_gamma : int, float
         Window radius R and colour scale γ of the photometric cost
         (:func:`varflow.ops.fusion.support_weights` of the reference frame).

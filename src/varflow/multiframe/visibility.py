@@ -13,7 +13,7 @@ must pass:
    the inverse of ``T_n`` refined by the two-frame solver on the finest pyramid
    levels; the inverse is the fixed-point inversion (exact where ``T_n`` is
    smooth) or, with ``splat=True`` (for trajectories from matching, see
-   :attr:`varflow.multiframe.rlr.MultiFrameParams.propagate_matching`), per pixel
+   :attr:`varflow.multiframe.params.MultiFrameParams.propagate_matching`), per pixel
    the better fit to the frames of it and the splatted one (every reference pixel
    sends ``−T_n`` to where it lands, which follows a small object moving farther
    than its size, where the fixed point takes the motion of the surroundings).

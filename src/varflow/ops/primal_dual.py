@@ -3,14 +3,15 @@
 The building blocks that every solver of the TV-L1 family composes into its
 iteration kernel: :func:`varflow.twoframe.tvl1.tvl1_iterations` (two-frame TV-L1
 and its tensor-directed variant), :mod:`varflow.twoframe.sparse` (the combined
-sparse energy) and :func:`varflow.multiframe.rlr.ustep_iterations` (the U-step of
+sparse energy) and :func:`varflow.multiframe.ustep.ustep_iterations` (the U-step of
 the multi-frame methods).  Each works on one image row of planar ``(K, H, W)``
 float32 arrays, in place, so that a solver sweeps rows in parallel blocks
 (:func:`row_blocks`) and keeps the data of a row in cache for several updates.
 
-* :func:`data_prox_row`: the prox of the linearised multi-channel L1 data term
-  ``λ Σ_c |a_c + ∇I_c · u|`` by dual coordinate descent (the row version of
-  :func:`varflow.ops.prox.prox_linear_l1`);
+* :func:`~varflow.ops.prox.data_prox_row`: the prox of the linearised multi-channel
+  L1 data term ``λ Σ_c |a_c + ∇I_c · u|`` by dual coordinate descent (the row version
+  of :func:`varflow.ops.prox.prox_linear_l1`), which lives in :mod:`varflow.ops.prox`
+  with the other variants of that prox (issue 46) and is imported here;
 * :func:`primal_row`: ``u ← d + θ div p`` with the Neumann divergence of
   :func:`varflow.ops.differences.divergence`;
 * :func:`dual_row`: the dual TV step ``p ← Π_{|p| ≤ g}(p + step · T∇u)``, with the
@@ -39,6 +40,7 @@ import numba as nb
 import numpy as np
 
 from .._jit import FASTMATH
+from .prox import EPS_GRAD, data_prox_row
 
 __all__ = [
     "F0",
@@ -58,7 +60,6 @@ __all__ = [
 # float32 constants: Python float literals would make Numba compute in float64
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
-EPS_GRAD = np.float32(1e-12)
 
 
 @nb.njit(cache=True, inline="always")
@@ -80,44 +81,6 @@ def row_blocks(h: int) -> np.ndarray:
 # The row kernels below index 1-D row views with plain loop variables only (no
 # ``j - 1``): Numba then knows every index is non-negative, drops its wrap-around
 # checks and LLVM vectorises the loops.
-
-
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def data_prox_row(ix, iy, a, q, i, d1, d2, t, n_sweeps):
-    """Prox of the linearised colour L1 term for row ``i`` (in place on d1, d2, q).
-
-    Dual coordinate descent over the channels (see :func:`varflow.ops.prox.prox_linear_l1`);
-    on entry ``d = u``; on exit ``d = u - t Σ_c q_c ∇I_c``.
-    """
-    nc = a.shape[0]
-    w = a.shape[2]
-    for c in range(nc):
-        gxr = ix[c, i]
-        gyr = iy[c, i]
-        qr = q[c, i]
-        for j in range(w):
-            qv = t * qr[j]
-            d1[j] -= qv * gxr[j]
-            d2[j] -= qv * gyr[j]
-    for _s in range(n_sweeps):
-        for c in range(nc):
-            gxr = ix[c, i]
-            gyr = iy[c, i]
-            ar = a[c, i]
-            qr = q[c, i]
-            for j in range(w):
-                gx = gxr[j]
-                gy = gyr[j]
-                qo = t * qr[j]
-                e1 = d1[j] + qo * gx
-                e2 = d2[j] + qo * gy
-                nn = gx * gx + gy * gy
-                r = ar[j] + gx * e1 + gy * e2
-                qn = r / (t * nn) if nn >= EPS_GRAD else F0
-                qn = min(max(qn, -F1), F1)
-                qr[j] = qn
-                d1[j] = e1 - t * qn * gx
-                d2[j] = e2 - t * qn * gy
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")

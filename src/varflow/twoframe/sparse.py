@@ -66,8 +66,12 @@ import numpy as np
 
 from .._jit import FASTMATH
 from ..ops.differences import divergence, gradient
-from ..ops.primal_dual import EPS_GRAD, dual_row, ordered_sum, primal_row, row_blocks
-from ..ops.prox import prox_huber_conjugate
+from ..ops.primal_dual import dual_row, ordered_sum, primal_row, row_blocks
+from ..ops.prox import (
+    data_prox_row_pixel_step,
+    prox_huber_conjugate,
+    prox_linear_l1_pixel_step,
+)
 from ..sparse import (
     PatchGrid,
     check_layout,
@@ -728,45 +732,6 @@ def _continuation(mu: float, stages: int) -> np.ndarray:
 # --------------------------------------------------------------------- primal-dual
 
 
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps):
-    """:func:`varflow.ops.primal_dual.data_prox_row` with a per-pixel step ``tr[j]``.
-
-    In place on ``d1, d2`` (on entry the prox centre, on exit
-    ``d - t Σ_c q_c ∇I_c``) and on the row ``i`` of ``q``.
-    """
-    nc = a.shape[0]
-    w = a.shape[2]
-    for c in range(nc):
-        gxr = ix[c, i]
-        gyr = iy[c, i]
-        qr = q[c, i]
-        for j in range(w):
-            qv = tr[j] * qr[j]
-            d1[j] -= qv * gxr[j]
-            d2[j] -= qv * gyr[j]
-    for _s in range(n_sweeps):
-        for c in range(nc):
-            gxr = ix[c, i]
-            gyr = iy[c, i]
-            ar = a[c, i]
-            qr = q[c, i]
-            for j in range(w):
-                gx = gxr[j]
-                gy = gyr[j]
-                t = tr[j]
-                qo = t * qr[j]
-                e1 = d1[j] + qo * gx
-                e2 = d2[j] + qo * gy
-                nn = gx * gx + gy * gy
-                r = ar[j] + gx * e1 + gy * e2
-                qn = r / (t * nn) if nn >= EPS_GRAD else _F0
-                qn = min(max(qn, -_F1), _F1)
-                qr[j] = qn
-                d1[j] = e1 - t * qn * gx
-                d2[j] = e2 - t * qn * gy
-
-
 @nb.njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
 def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv, theta, tau,
                          max_iter, tol, n_sweeps, aniso, blocks, huber=0.0):
@@ -838,7 +803,7 @@ def sparse_pd_iterations(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, lam_tv
                     d1[j] = s * u1[j] + (_F1 - s) * b1[j]
                     d2[j] = s * u2[j] + (_F1 - s) * b2[j]
                     tr[j] = lam * theta * s
-                _data_prox_row_pp(ix, iy, a, q, i, d1, d2, tr, n_sweeps)
+                data_prox_row_pixel_step(ix, iy, a, q, i, d1, d2, tr, n_sweeps)
                 err = primal_row(u, tp, i, 0, d1, theta)
                 errs[i] = err + primal_row(u, tp, i, 1, d2, theta)
                 if i > r0:
@@ -857,24 +822,14 @@ def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, 
     s = (1.0 / (1.0 + 2 * theta * wsp)).astype(np.float32)
     t = (lam * theta * s).astype(np.float32)
     gs = (g * lam_tv).astype(np.float32)
-    nn = ix * ix + iy * iy
-    safe = nn >= 1e-12
-    inv = np.where(safe, 1.0 / (t * np.where(safe, nn, 1.0)), 0.0).astype(np.float32)
     T = _tensor_matrices(tens) if aniso else None
     it = 0
     while it < max_iter:
         it += 1
         # point-wise step: prox of t Σ_c |ρ_c| at z, dual coordinate descent (warm q)
-        d0 = s * u[0] + (1 - s) * ubar[0] - t * (q * ix).sum(0)
-        d1 = s * u[1] + (1 - s) * ubar[1] - t * (q * iy).sum(0)
-        for _ in range(n_sweeps):
-            for c in range(a.shape[0]):
-                e0 = d0 + t * q[c] * ix[c]
-                e1 = d1 + t * q[c] * iy[c]
-                qn = np.clip((a[c] + ix[c] * e0 + iy[c] * e1) * inv[c], -1.0, 1.0)
-                q[c] = qn
-                d0 = e0 - t * qn * ix[c]
-                d1 = e1 - t * qn * iy[c]
+        d0, d1 = prox_linear_l1_pixel_step((s * u[0] + (1 - s) * ubar[0],
+                                            s * u[1] + (1 - s) * ubar[1]), a, ix, iy, t, q,
+                                           n_sweeps)
         new = np.stack([dk + theta * divergence(np.moveaxis(tp[2 * k : 2 * k + 2], 0, -1))
                         for k, dk in enumerate((d0, d1))])
         err = float(((new - u) ** 2).sum()) / (h * w)

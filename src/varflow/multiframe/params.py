@@ -1,0 +1,485 @@
+"""The parameters of the multi-frame methods.
+
+:class:`MultiFrameParams` (the fields shared by RLR and MFSF, with their two-frame
+energy), :class:`RLRParams` (RLR's own), the default energy :data:`TVL1_ENERGY` and
+the offsets of the final repair, :data:`FINAL_REPAIR_DISTANCES`.  The methods are
+described in :mod:`varflow.multiframe.rlr` and :mod:`varflow.multiframe.mfsf`; the
+refinement that reads most of these fields is :mod:`varflow.multiframe.refine`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from .._validate import check_field as _check
+from ..twoframe.coarse_to_fine import CoarseToFineParams
+from ..twoframe.methods import DEFAULT_METHOD, METHODS
+from ..twoframe.tvl1 import TVL1Params
+from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
+from .propagate import DEFAULT_REPAIR_COST, REPAIR_COSTS
+from .track import FlowTrackParams
+from .visibility import VisibilityParams
+
+__all__ = ["TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams", "RLRParams"]
+
+#: Offsets (pixels) of the final repair.  Tuning split of the photographic clips,
+#: mean EPE / occlusion accuracy: (2, 4, 8) 0.874 / 0.966, (2, 4) 0.861 / 0.967,
+#: (4,) 0.860 / 0.966 (objects 0.732 → 0.745, illumination 2.93 → 2.84) at a third
+#: of the cost of three distances.
+FINAL_REPAIR_DISTANCES = (4,)
+
+#: The default two-frame energy of the multi-frame methods (issue 27): ``tvl1``'s data
+#: term and regulariser — the grey channel, λ_D = 15 with gradient constancy γ = 140,
+#: Huber-TV ε_H = 0.02, edge weight c = 30, texture α = 0.3 and the noise rule — with
+#: the plain energy's solver settings (5 warps per level, 50 iterations of the initial
+#: flows), the weighted median on every level (r = 3, as RLR had since issue 11) and no
+#: sharpness match (it matches two frames).  rlr on the photographic tuning split (with
+#: the link's fit gate, ``link_gate`` 2): mean EPE 0.665 against 0.851 with the book's
+#: plain energy (affine 0.034 / 0.041, nonrigid 0.104 / 0.104, objects 0.651 / 0.677,
+#: illumination 2.05 / 2.90, noise 0.48 / 0.53).  Without the gate its link drags a small
+#: fast object off its track (the fast-object clip of the tests: far frames 5.2-6.7 px
+#: over L-step seeds, 0.12 px decoupled).
+TVL1_ENERGY = TVL1Params(max_iterations=50, n_warps=5, weighted_median_levels=0,
+                         sharpness_match=False)
+
+
+@dataclass(frozen=True)
+class MultiFrameParams(FlowTrackParams):
+    """Fields shared by the multi-frame methods (RLR, MFSF), and their two-frame energy.
+
+    Composed, not inherited (issue 27): ``flow_method`` and ``flow_params`` (of
+    :class:`~varflow.multiframe.track.FlowTrackParams`) are the two-frame method
+    whose energy the trajectories minimise, frame by frame, and whose flows
+    initialise them.  Its fields serve the initial flows and the multi-frame
+    refinement alike: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…),
+    the pre-processing, the median filters, the data term (λ_D = ``data_weight``,
+    γ = ``gradient_weight``, ζ = ``data_normalisation``, ``grey``, the noise rule
+    ``noise_reference``), Huber-TV (``huber``) and the edge weight
+    (``edge_weight``, ``edge_weight_min``), and θ (``coupling``) of the relaxed
+    data term (``relaxed_data``); ``max_iterations`` and ``tolerance``
+    serve the two-frame flows (the U-step has ``ustep_iterations`` and
+    ``ustep_tolerance``).  :func:`varflow.registry.make_track_params` (and so
+    :func:`varflow.track` and the CLI) routes a field of the energy to
+    ``flow_params``.  The method must be TV-L1's (``tvl1``, ``tvl1-fast``,
+    ``tvl1-ld``: the U-step has its data term and isotropic TV); its
+    ``sharpness_match`` matches two frames and must be off.  A method named without
+    ``flow_params`` takes :meth:`default_flow_params`.
+
+    Attributes
+    ----------
+    tv_weight : float
+        λ_TV, weight of the edge-weighted TV of every frame's displacement
+        (relative to λ_D = ``data_weight`` as in TV-L1).  Default 1.
+    primal_step : float
+        s, primal step of the primal-dual iteration; the dual step is
+        σ = 1 / (8 s) (so that s σ ||∇||² ≤ 1).  Default 0.25.
+    ustep_iterations : int
+        Primal-dual iterations of the U-step per warp and alternation.  Default 50
+        (the plain energy's ``max_iterations``, which served both before).
+    alternations : int
+        Coupling-target / U-step alternations per warp.  Default 1.
+    data_prox : {"auto", "exact", "cd"}
+        Point-wise prox of data + link terms: exact (dual coordinate descent
+        proposes the active set, an optimality certificate accepts it, else face
+        enumeration; :func:`prox_certified`), dual coordinate descent alone
+        (``data_sweeps`` sweeps per iteration, warm started), or "auto" = exact for
+        a one-channel data term (grey frames, no gradient term), coordinate descent
+        for more channels (the same errors, the U-step about 5x faster for colour).
+    init : {"propagate", "twoframe", "zero"}
+        Initial trajectories: propagated outward from the reference and refined
+        against it frame by frame
+        (:func:`~varflow.multiframe.propagate.propagate_trajectories`), TV-L1 from
+        the reference to every frame independently, or zero.  Default "propagate".
+    refine_levels : int
+        With an initialisation other than "zero", the multi-frame refinement runs
+        on this many of the finest pyramid levels, starting from the initial
+        trajectories resized to the coarsest of them; 0 = every level.  Restarting
+        the refinement from the coarsest level would throw the initialisation's
+        detail away.  Default 3.
+    ustep_tolerance : float
+        Stop a U-step early when the RMS change of a frame's displacement per
+        primal-dual iteration is below this many pixels; 0 runs
+        ``ustep_iterations`` iterations.  The primal-dual steps are small, so the
+        TV-L1 ``tolerance`` (which serves the initialisation) would stop it after a
+        few iterations.  Default 0.
+    propagate_levels : int
+        With ``init="propagate"``: pyramid levels of the refinement of a frame's
+        trajectory extrapolated from its neighbours
+        (:func:`varflow.multiframe.propagate.propagate_trajectories`).  Default 3.
+    propagate_direct : bool
+        With ``init="propagate"``: also compute each far frame's direct two-frame
+        flow from the reference and keep, per pixel, the candidate that fits the
+        frames better.  Default False.
+    propagate_matching : bool
+        With ``init="propagate"``: add every frame's ``tvl1-ld`` flow from the
+        reference (descriptor matches fused into the pyramid, computed as
+        ``varflow.flow(frames[ref], frames[n], "tvl1-ld")`` does) as a candidate,
+        kept per pixel where it fits the frames better by the census cost of
+        :mod:`varflow.multiframe.propagate`, and offer the splatted inverse to the
+        visibility's backward flows.  Default True (tuning split of the
+        photographic clips, 31 frames: mean EPE 0.578 against 0.665 without,
+        lower on every family; affine 0.0334 / 0.0335, nonrigid 0.102 / 0.104,
+        objects 0.438 / 0.651, illumination 1.99 / 2.05, noise 0.325 / 0.483).
+    visibility : bool
+        Estimate which reference points are hidden in which frame from the
+        initial trajectories (:mod:`varflow.multiframe.visibility`) and switch the
+        data term off there: a hidden point has nothing to match, so the
+        regulariser and the coupling decide it.  Default True.
+    fb_tolerance : float
+        Largest forward-backward error of a visible point, pixels.  Default 1.5.
+    photo_factor : float
+        A visible point's photometric cost is at most this many times the frame's
+        median cost.  Default 4.
+    visibility_levels : int
+        Pyramid levels of the backward flows of the visibility estimate, refined
+        from the inverted initial trajectories.  Default 1 (tuning split of the
+        photographic clips: occlusion accuracy 0.966 against 0.959 with 3 levels,
+        mean EPE 0.874 for both; a third of the time).
+    visibility_warps : int
+        Warps per level of those backward flows.  Default 2 (tuning split of the
+        photographic clips: mean EPE 0.858 / occlusion accuracy 0.967, against
+        0.861 / 0.966 with 5 warps).
+    final_repair : bool
+        After the refinement, let every pixel of every frame take the vector of a
+        pixel a few pixels away where that fits the frames better
+        (:func:`varflow.ops.fusion.repair`), as the propagation does: the TV of
+        the refinement lets a band of one surface's motion bleed over object
+        edges.  It tries the vectors 4 pixels away in 8 directions
+        (:data:`FINAL_REPAIR_DISTANCES`); the frames ``ref ± 1`` only with
+        ``repair_adjacent``.  Default True.
+    repair_adjacent : bool
+        Also repair the two frames next to the reference, ``ref ± 1``, in the
+        propagation and in the final repair.  Their flows come from the whole
+        pyramid (no propagated band along object edges to undo), and on real
+        footage the repair's photometric cost is less reliable than those flows:
+        on MPI-Sintel final/alley_1 (9-frame windows, frame r+1 against the
+        ground truth, references 5…10) the defaults' mean AEE is 0.297, and 0.328
+        with this repair (measured while ``adjacent_link_factor`` still spared the
+        hidden entries; the two-frame flow: 0.329; at r = 10 0.311 against 0.359).
+        Default False.
+    repair_cost : {"colour", "relit", "census"}
+        The residual that the propagation's repair and the final repair compare
+        (:func:`varflow.ops.fusion.repair_with`): the frames' colours; the colours
+        with the reference under the other frame's light, fitted along the flow
+        (a gain that varies linearly across the frame and an offset,
+        :func:`varflow.ops.fusion.relight`); or their soft census planes, which a
+        change of light leaves alone but which also drop the colours.  Under a
+        change of light the colour cost prefers wrong vectors that land on a
+        matching brightness.  Default "relit" (photographic suite, full rlr, mean
+        EPE colour → relit: tuning split 0.5529 → 0.2280, illumination 1.9649 →
+        0.3272, objects and noise 2 % worse; reporting split 0.6244 → 0.2251,
+        illumination 2.3816 → 0.3866; census repaired the light changes as well,
+        but its initial trajectories were worse on the tuning split's objects and
+        noise clips).
+    relaxed_data : bool
+        Relax the U-step's data term as TV-L1 does (Zach et al. 2007): the term
+        becomes ``min_v |u − v|²/(2θ) + λ_D D(v)`` with θ = ``coupling`` of the
+        two-frame energy (0.3), the energy that ``tvl1``'s own solver minimises —
+        quadratic for residuals below ``λ_D θ |∇I|²``, L1 beyond.  The link stays an
+        exact L1 term on the trajectories.  False keeps the data term itself (the
+        book's U-step).  Default True: on real footage the relaxed term is the
+        better one (MPI-Sintel final/alley_1, 9-frame windows, frame r + 1: 0.2508
+        against 0.2586, lower at every reference r = 5…10; RubberWhale frame 11:
+        0.0967 against 0.0992), while the photographic tuning split measures mean
+        EPE 0.2284 against 0.2254 (affine and nonrigid lower, objects, illumination
+        and noise higher; see benchmarks/HISTORY.md).
+    hidden_data_weight : float
+        Factor of the data term of the entries marked hidden, in [0, 1]: 0 switches
+        it off, 1 keeps it (the visibility then only steers the coupling: the
+        L-step's weights and ``hidden_link_weight``).  Default 0 (development clips
+        of the tuning split: mean EPE 0.189 against 0.193 with 1; RubberWhale and
+        the noisy synthetic clips the same within 1 %).
+    """
+
+    tv_weight: float = 1.0
+    primal_step: float = 0.25
+    ustep_iterations: int = 50
+    alternations: int = 1
+    data_prox: str = "auto"
+    init: str = "propagate"
+    refine_levels: int = 3
+    ustep_tolerance: float = 0.0
+    propagate_levels: int = 3
+    propagate_direct: bool = False
+    propagate_matching: bool = True
+    visibility: bool = True
+    fb_tolerance: float = 1.5
+    photo_factor: float = 4.0
+    visibility_levels: int = 1
+    visibility_warps: int = 2
+    final_repair: bool = True
+    repair_adjacent: bool = False
+    repair_cost: str = DEFAULT_REPAIR_COST
+    hidden_data_weight: float = 0.0
+    relaxed_data: bool = True
+
+    @classmethod
+    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
+        """The energy of a ``flow_method`` named without ``flow_params``:
+        :data:`TVL1_ENERGY` for ``tvl1`` (its data term and regulariser), another
+        method's defaults with the sharpness match off (it matches two frames)."""
+        if flow_method == DEFAULT_METHOD:
+            return TVL1_ENERGY
+        defaults = super().default_flow_params(flow_method)
+        if getattr(defaults, "sharpness_match", False):
+            defaults = replace(defaults, sharpness_match=False)
+        return defaults
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check(METHODS[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
+               f"the multi-frame U-step has TV-L1's energy (isotropic TV); "
+               f"{self.flow_method!r} is not a TV-L1 method")
+        _check(not self.flow_params.sharpness_match, "sharpness_match",
+               "must be False here: it matches two frames, the multi-frame methods "
+               "see a whole clip")
+        _check(self.ustep_iterations >= 1, "ustep_iterations",
+               f"must be >= 1, got {self.ustep_iterations}")
+        _check(self.tv_weight > 0, "tv_weight", f"must be > 0, got {self.tv_weight}")
+        _check(self.primal_step > 0, "primal_step", f"must be > 0, got {self.primal_step}")
+        _check(self.alternations >= 1, "alternations", f"must be >= 1, got {self.alternations}")
+        _check(
+            self.data_prox in ("auto", "exact", "cd"),
+            "data_prox",
+            f"must be 'auto', 'exact' or 'cd', got {self.data_prox!r}",
+        )
+        _check(
+            self.init in ("propagate", "twoframe", "zero"),
+            "init",
+            f"must be 'propagate', 'twoframe' or 'zero', got {self.init!r}",
+        )
+        _check(self.refine_levels >= 0, "refine_levels",
+               f"must be >= 0, got {self.refine_levels}")
+        _check(self.ustep_tolerance >= 0, "ustep_tolerance",
+               f"must be >= 0, got {self.ustep_tolerance}")
+        _check(self.propagate_levels >= 1, "propagate_levels",
+               f"must be >= 1, got {self.propagate_levels}")
+        _check(self.repair_cost in REPAIR_COSTS, "repair_cost",
+               f"must be 'colour', 'relit' or 'census', got {self.repair_cost!r}")
+        _check(0 <= self.hidden_data_weight <= 1, "hidden_data_weight",
+               f"must be in [0, 1], got {self.hidden_data_weight}")
+        _check(self.visibility_levels >= 1, "visibility_levels",
+               f"must be >= 1, got {self.visibility_levels}")
+        _check(self.visibility_warps >= 1, "visibility_warps",
+               f"must be >= 1, got {self.visibility_warps}")
+        self.visibility_params()  # validates fb_tolerance and photo_factor
+
+    def visibility_params(self) -> VisibilityParams:
+        """The :class:`~varflow.multiframe.visibility.VisibilityParams` of these fields."""
+        return VisibilityParams(fb_tolerance=self.fb_tolerance, photo_factor=self.photo_factor,
+                                backward_levels=self.visibility_levels)
+
+
+@dataclass(frozen=True)
+class RLRParams(MultiFrameParams):
+    """Parameters of Robust Low-Rank trajectories (and those of :class:`MultiFrameParams`).
+
+    Attributes
+    ----------
+    link_weight : float
+        τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
+        the units of the TV weight); the frames next to the reference take a
+        fraction of it on clean footage (``adjacent_link_factor``).  0 decouples
+        the frames (no L-step).  Default 2 (chosen on the tuning split of the
+        photographic clips, :mod:`varflow.generators.photo`).
+    adjacent_link_factor : float
+        a_min, the smallest factor of the link weight of the two frames next to
+        the reference, ``ref ± 1``: their link weights (τ, and τ_h where hidden)
+        are scaled by ``a_1 = min(1, max(a_min, (σ/σ_0)²))``, ``σ`` the noise of their
+        residual estimated from the frames (:func:`adjacent_factor`).  Their data
+        term is the most reliable of the clip (the smallest displacement,
+        occlusion and change of appearance) unless the frames are noisy, while the
+        low-rank fit of their rows follows the other frames: on clean real
+        footage, whose trajectories are not low rank over a few frames, a strong
+        link drags them (RubberWhale frame 11: AEE 0.1305 at a_1 = 1, 0.0987 with
+        the rule, a_1 ≈ 0.011, against 0.0994 for the two-frame flow), and on noisy frames
+        the link is what averages the noise out (the noisy procedural clip of the
+        tests, σ ≈ 0.04: mean EPE 0.074 at a_1 = 1, 0.101 at 0.1).  In [0, 1];
+        1 links every frame alike.  Default 0.01.
+    adjacent_noise : float
+        σ_0 of that rule, intensity units of [0, 1] frames: the residual noise at
+        which the adjacent frames are linked as strongly as the others (a_1 = 1);
+        the weight falls with the square of the noise, as the inverse variance
+        of the data term's estimate would.  Default 0.08.
+    hidden_link_weight : float
+        τ_h, the link weight of the entries the visibility estimate marks hidden
+        (they have nothing reliable to match, so the low-rank fit should decide
+        them rather than the TV of their neighbours).  Default 2.
+    pcp_scale : float
+        κ: the L-step solves PCP with ``λ = τ/α = κ / sqrt(max(2F, N))`` (the
+        standard weight of Candès et al. for κ = 1); it sets the nuclear-norm weight
+        α.  Larger κ keeps more rank.  Default 1.
+    rank_tol : float
+        Relative singular-value threshold of the L-step's basis: directions of the
+        seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
+        rank is estimated, never given).  Dense estimation noise otherwise enters
+        ``L`` as many tiny singular values.  Default 0.003 (tuning split of the
+        photographic clips: 0.03 underfits a small moving object, fitted to the
+        exact trajectories it leaves 0.44 px against 0.02 px).
+    rank_rule : {"relative", "noise"}
+        Rank of the L-step's basis: the ``rank_tol`` threshold relative to the
+        largest singular value, or the optimal hard threshold of Gavish & Donoho
+        (2014) for the noise level estimated from the singular values
+        (:func:`varflow.multiframe.lowrank.noise_rank`).  Default "relative"
+        (RubberWhale frame-11 AEE 0.132 against 0.141 with "noise").
+    lowrank_method : {"linear", "exact"}
+        L-step solver: l1 filtering on a random column sample (linear cost) or full
+        PCP (reference; its L is truncated by the same ``rank_tol`` rule).
+        Default "linear".
+    lowrank_samples : int
+        Columns sampled by the linear L-step; 0 = the solver's default
+        (``max(20 · 2F, 4000)``, :data:`varflow.multiframe.lowrank.DEFAULT_MIN_SAMPLES`).
+        Default 0.
+    seed : int
+        Seed of the L-step's column sampling (local generator).  Default 0.
+    link_edge : bool
+        Scale the link weight by the edge weight g(x) (weaker link across image
+        edges).  Default False.
+    velocity_rows : bool
+        Run the L-step on mean velocities: frame n's rows divided by ``|n − ref|``
+        (then multiplied back), so that far frames, whose displacements are larger,
+        do not dominate the fit; constant-velocity motion becomes rank 2.
+        Default True (synthetic suite: mean EPE 0.0644 against 0.0674 without;
+        RubberWhale frame-11 AEE 0.176 against 0.283).
+    lowrank_strata : int
+        Motion clusters of the L-step's stratified column sample
+        (:func:`varflow.multiframe.lowrank.sample_columns`); 0 = a uniform sample,
+        which can miss a small moving object.  Default 8.
+    level_basis : bool
+        Find the low-rank basis (seed PCP and rank) at the first warp of every
+        pyramid level and keep it for the level's other warps, which then only
+        refit every column to it (l1 filtering).  Default True.
+    lowrank_tolerance : float
+        Relative residual at which the l1 fit of a column stops
+        (:func:`varflow.multiframe.lowrank.l1_regression`, ``tol``).  The fit is a
+        target for the next U-step, not a result: 1e-4 differs from 1e-7 by
+        2.5e-4 px on average and takes 0.6× the iterations.  Default 1e-4.
+
+    link_gate : float
+        k of the link's fit gate (:func:`fit_gate`): the link weight of the visible
+        entries of a region is scaled by ``1 / (1 + (r / (k m))²)``, ``r`` the
+        region's misfit to the low-rank target and ``m`` the clip's median misfit,
+        so that where the motion is not low rank the refinement is decoupled; 0
+        turns the gate off.  Default 1 (tuning split of the photographic clips with
+        the matching-guided candidates: mean EPE 0.564 at k = 1 against 0.578 at
+        k = 2, lower or equal on every family; the decoupled refinement,
+        ``link_weight=0``, 0.535: the link still costs on the objects and
+        illumination families.  The fast-object clip of the tests, far frames
+        0.22-0.48 px at k = 1, 0.36-1.04 at k = 2, 0.9-4.4 ungated, 0.12-0.15
+        decoupled).
+    decoupled_fusion : bool
+        Also refine without the link (``link_weight = 0``, the same initial
+        trajectories and visibility) and keep, per pixel and frame, whichever of
+        the two fits the frames better by the soft-census cost
+        (:func:`fuse_decoupled`), the linked one unless the decoupled one is better
+        by the margin ``m = fusion_margin + fusion_noise · σ²``, σ the residual noise
+        of the frames (:func:`residual_noise`), blended near the margin
+        (``fusion_softness``).  The link thus stays where the
+        motion is low rank or the frames are too noisy to tell, and gives way where
+        it pulls a region off its data.  Default True (tuning split of the
+        photographic clips, warm kernel cache, the two refinements fused after the
+        fact: mean EPE 0.544 against 0.581 without and 0.567 for ``link_weight=0``;
+        below the decoupled refinement on every family and below the linked one on
+        every family but affine, 0.0338 against 0.0336).  Costs a second refinement
+        (not a second initialisation).
+    fusion_margin : float
+        m₀, the cost advantage the decoupled displacement needs on clean frames
+        (units of the truncated census cost, :func:`varflow.ops.fusion.flow_cost`).
+        Default 0.005 (tuning split with ``fusion_noise`` 0: margin 0 gives 0.5454
+        with affine 0.0396, 0.005 gives 0.5449, 0.02 gives 0.5497).
+    fusion_noise : float
+        β of the margin's noise term ``β σ²``: on noisy frames a lower census cost
+        is as likely the noise as the motion.  Default 15 (tuning split 0.5442; 5
+        gives 0.5439, 30 0.5453; a 12-frame affine clip with noise σ = 0.04, σ_r =
+        0.057: margin 0 gives 0.117, 0.005 gives 0.109, 0.054 (β = 15) 0.090, the
+        linked refinement alone 0.089, the decoupled one 0.147).
+    fusion_softness : float
+        κ, the width of the fusion's blend as a fraction of the margin m
+        (:func:`fuse_decoupled`): the decoupled displacement's weight is the
+        logistic function of ``(C_c − C_d − m) / (κ m)``, ½ at a cost advantage of m
+        and near 0 or 1 a few κ·m away, so the two refinements are mixed where the
+        census cost hardly tells them apart; 0 is the hard choice.  Default 0.5
+        (tuning split, the same refinements fused afterwards: mean EPE / far EPE
+        0.2279 / 0.489 hard, 0.2254 / 0.483 at 0.5, 0.2253 / 0.481 at 1, 0.2267 /
+        0.483 at 2; at 0.5 lower or equal on every family, affine 0.0331 against
+        0.0332, illumination 0.3245 against 0.3280).
+    fusion_evidence : float
+        γ, the weight of the region's cost difference in the fusion
+        (:func:`fuse_decoupled`): a pixel's ``C_c − C_d`` gains γ times its mean
+        over the textured pixels around it, so that a flat region, where both runs
+        fit the frames equally, follows the textured surroundings that tell them
+        apart.  0 compares each pixel alone (0.7.1).  Default 3 (tuning
+        split, the two refinements of 0.7.1 fused afterwards, mean EPE / mean far
+        EPE over the families: 0 0.2317 / 0.4748; γ 1 / 2 / 3 at radius 8 0.2288 /
+        0.4658, 0.2281 / 0.4639, 0.2279 / 0.4637; at radius 16 0.2293 / 0.2287 /
+        0.2286; over the whole frame 0.2293 / 0.2285 / 0.2284; every family lower at
+        γ 3, radius 8, than at 0).
+    fusion_radius : float
+        σ of the region of ``fusion_evidence``, pixels.  Default 8 (see there).
+
+    The default energy is :data:`TVL1_ENERGY` (:meth:`MultiFrameParams.default_flow_params`);
+    ``flow_params=PlainTVL1Params(weighted_median_radius=3)`` is the book's plain
+    energy with the weighted median, RLR's default before issue 27.
+    """
+
+    link_weight: float = 2.0
+    adjacent_link_factor: float = 0.01
+    adjacent_noise: float = 0.08
+    hidden_link_weight: float = 2.0
+    pcp_scale: float = 1.0
+    rank_tol: float = 0.003
+    rank_rule: str = "relative"
+    lowrank_method: str = "linear"
+    lowrank_samples: int = 0
+    seed: int = 0
+    link_edge: bool = False
+    velocity_rows: bool = True
+    lowrank_strata: int = 8
+    level_basis: bool = True
+    lowrank_tolerance: float = 1e-4
+    link_gate: float = 1.0
+    decoupled_fusion: bool = True
+    fusion_margin: float = 0.005
+    fusion_noise: float = 15.0
+    fusion_softness: float = 0.5
+    fusion_evidence: float = 3.0
+    fusion_radius: float = 8.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check(self.link_weight >= 0, "link_weight", f"must be >= 0, got {self.link_weight}")
+        _check(self.hidden_link_weight >= 0, "hidden_link_weight",
+               f"must be >= 0, got {self.hidden_link_weight}")
+        _check(0 <= self.adjacent_link_factor <= 1, "adjacent_link_factor",
+               f"must be in [0, 1], got {self.adjacent_link_factor}")
+        _check(self.adjacent_noise > 0, "adjacent_noise",
+               f"must be > 0, got {self.adjacent_noise}")
+        _check(self.pcp_scale > 0, "pcp_scale", f"must be > 0, got {self.pcp_scale}")
+        _check(0 < self.rank_tol < 1, "rank_tol", f"must be in (0, 1), got {self.rank_tol}")
+        _check(
+            self.lowrank_method in ("linear", "exact"),
+            "lowrank_method",
+            f"must be 'linear' or 'exact', got {self.lowrank_method!r}",
+        )
+        _check(self.rank_rule in ("relative", "noise"), "rank_rule",
+               f"must be 'relative' or 'noise', got {self.rank_rule!r}")
+        _check(self.lowrank_strata >= 0, "lowrank_strata",
+               f"must be >= 0, got {self.lowrank_strata}")
+        _check(0 < self.lowrank_tolerance < 1, "lowrank_tolerance",
+               f"must be in (0, 1), got {self.lowrank_tolerance}")
+        _check(self.link_gate >= 0, "link_gate", f"must be >= 0, got {self.link_gate}")
+        _check(self.fusion_margin >= 0, "fusion_margin",
+               f"must be >= 0, got {self.fusion_margin}")
+        _check(self.fusion_noise >= 0, "fusion_noise",
+               f"must be >= 0, got {self.fusion_noise}")
+        _check(self.fusion_softness >= 0, "fusion_softness",
+               f"must be >= 0, got {self.fusion_softness}")
+        _check(self.fusion_evidence >= 0, "fusion_evidence",
+               f"must be >= 0, got {self.fusion_evidence}")
+        _check(self.fusion_radius > 0, "fusion_radius",
+               f"must be > 0, got {self.fusion_radius}")
+        _check(
+            self.lowrank_samples >= 0,
+            "lowrank_samples",
+            f"must be >= 0, got {self.lowrank_samples}",
+        )
