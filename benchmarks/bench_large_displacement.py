@@ -30,12 +30,13 @@ from varflow.evaluation.bench.twoframe import (
     sintel_pairs_present,
 )
 from varflow.evaluation.datasets import data_root, load_sintel_pair
-from varflow.twoframe.large_displacement import LargeDisplacementParams, tvl1_ld
+from varflow.twoframe.large_displacement import tvl1_ld
+from varflow.twoframe.params import preset
 
 
 def stage_table(root, repeats: int) -> str:
     """Median seconds per stage of ``tvl1-ld`` on each large-motion Sintel pair."""
-    params = LargeDisplacementParams()
+    params = preset("tvl1-ld")
     pairs = sintel_pairs_present(root, SINTEL_LARGE_PAIRS)[0]
     clip, pass_, n = pairs[0]
     f0, f1, *_ = load_sintel_pair(clip, n, pass_, root)

@@ -181,7 +181,8 @@ def test_context_methods_get_the_neighbours(fake_root: Path, monkeypatch) -> Non
         return _BlendMotion(frame0, frame1)
 
     monkeypatch.setitem(rm.INTERPOLATORS, "fake-ctx",
-                        rm.Interpolator("fake-ctx", _CtxParams, prepare, "test", context=1))
+                        rm.Interpolator(name="fake-ctx", description="test", defaults=_CtxParams,
+                                        prepare=prepare, context=1))
     rows = bi.run_interpolation_bench(["sintel", "middlebury"], "all", ["fake-ctx"], ["blend"],
                                       root=fake_root, max_cases=2, progress=False,
                                       warm_up=False)

@@ -236,7 +236,7 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
         assert line.split()[0] == name and m.description in line
     rc, out, _ = run(capsys, "methods", "--params", "--markdown")
     assert rc == 0
-    default = registry.METHODS["tvl1"].params().data_weight
+    default = registry.FLOW["tvl1"].defaults().data_weight
     assert re.search(rf"`data_weight` \(`--data-weight`\) \| λ \| `{default!r}` \|", out)
     assert re.search(r"`splat_sharpness` \(`--splat-sharpness`\) \| α \| `50.0` \|", out)
 
@@ -244,8 +244,8 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
 def test_help_lists_generated_parameter_flags(capsys: pytest.CaptureFixture[str]) -> None:
     rc, out, _ = run(capsys, "flow", "--help")
     assert rc == 0
-    for f in dataclasses.fields(registry.METHODS["tvl1"].params):
-        assert "--" + f.name.replace("_", "-") in out
+    for name, _, _ in registry.parameter_fields(registry.FLOW["tvl1"]):
+        assert "--" + name.replace("_", "-") in out
     assert "--no-structure-texture" in out
 
 
@@ -297,7 +297,8 @@ def test_parameter_of_another_method_exit_2(
 
         dummy_strength: float = 1.0
 
-    method = registry.Method("dummy", DummyParams, registry.METHODS["tvl1"].solve_warp, "test")
+    method = registry.Method(name="dummy", description="test", defaults=DummyParams,
+                             solve_warp=registry.FLOW["tvl1"].solve_warp)
     monkeypatch.setitem(registry.METHODS, "dummy", method)
     rc, _, err = run(capsys, "flow", pair["f0"], pair["f1"], "-o", tmp_path / "o.flo",
                      "--dummy-strength", 2)

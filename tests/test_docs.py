@@ -72,7 +72,7 @@ def test_parameter_tables_are_the_dataclasses() -> None:
             for field, default, _ in parameter_fields(entry):
                 assert f"``{field}`` (``--{field.replace('_', '-')}``)" in text, (name, field)
                 assert f"``{default!r}``" in text, (name, field)
-        assert all(dataclasses.is_dataclass(e.params) for e in registry.values())
+        assert all(dataclasses.is_dataclass(e.params_type) for e in registry.values())
 
 
 def test_api_page_lists_the_public_names() -> None:
@@ -84,7 +84,8 @@ def test_api_page_lists_the_public_names() -> None:
         assert name in varflow.__all__ and f"   {name}\n" in page
     for name in video.__all__:
         assert f"   {name}\n" in page
-    for cls in ("varflow.twoframe.tvl1.TVL1Params", "varflow.multiframe.params.RLRParams",
+    for cls in ("varflow.twoframe.params.TVL1Params", "varflow.twoframe.params.SparseTerm",
+                "varflow.multiframe.params.RLRParams",
                 "varflow.retime.splatting.SplatParams"):
         assert f"   {cls}\n" in page
 

@@ -23,10 +23,10 @@ from varflow.ops.splat import (
     splat_trajectories_numpy,
 )
 from varflow.ops.warp import warp_bilinear, warp_bilinear_numpy
+from varflow.retime.methods import make_interp_params
 from varflow.retime.motion import FlowCache, pair_flows, reduced, working_scale
 from varflow.retime.schedule import slowmo_schedule
 from varflow.retime.splatting import (
-    SplatFastParams,
     SplatMotion,
     SplatParams,
     accelerations,
@@ -373,7 +373,7 @@ def test_bad_inputs_name_what_is_wrong() -> None:
 
 
 def test_the_presets() -> None:
-    p, fast = SplatParams(), SplatFastParams()
+    p, fast = SplatParams(), make_interp_params("splat-fast")
     assert (p.flow_method, p.flow_params.match_scale, p.flow_max_pixels) == ("tvl1-ld", 0.5,
                                                                              300_000)
     assert (p.flow_params.weighted_median_levels, p.flow_params.max_iterations) == (3, 24)

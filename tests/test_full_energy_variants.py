@@ -1,8 +1,8 @@
-"""The tensor-directed and sparse regularisers on ``tvl1``'s energy (issue 27, part 6).
+"""The tensor-directed and sparse regularisers on ``tvl1``'s energy.
 
-``tvl1-tensor`` and ``tvl1-sparse-*`` compose the fields of
-:class:`~varflow.twoframe.tensor.TensorFields` / :class:`~varflow.twoframe.sparse.SparseFields`
-onto :class:`~varflow.twoframe.tvl1.TVL1Params` (grey channel, gradient constancy,
+``tvl1-tensor`` and ``tvl1-sparse-*`` compose a
+:class:`~varflow.twoframe.params.TensorTerm` / :class:`~varflow.twoframe.params.SparseTerm`
+with :class:`~varflow.twoframe.params.TVL1Params`' defaults (grey channel, gradient constancy,
 Huber-TV, noise rule, weighted median, sharpness match).  The reductions: without the
 tensor (a = 0) the tensor variant is ``tvl1``; without the sparse term (λ_SP = 0, the
 exact primal-dual combined step) the sparse warps are the base energy's warps.
@@ -21,15 +21,11 @@ from varflow.twoframe import sparse as sp
 from varflow.twoframe import tensor, tvl1
 from varflow.twoframe.coarse_to_fine import coarse_to_fine
 from varflow.twoframe.methods import METHODS
-from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
+from varflow.twoframe.params import PRESETS, preset
+from varflow.twoframe.tvl1 import TVL1Params
 
-FULL = {
-    "tvl1-tensor": tensor.TVL1TensorParams,
-    "tvl1-sparse-dct": sp.TVL1SparseDCTParams,
-    "tvl1-sparse-1d": sp.TVL1Sparse1DParams,
-    "tvl1-sparse-2x1d": sp.TVL1Sparse2x1DParams,
-    "tvl1-sparse-2d": sp.TVL1Sparse2DParams,
-}
+FULL = ("tvl1-tensor", "tvl1-sparse-dct", "tvl1-sparse-1d", "tvl1-sparse-2x1d",
+        "tvl1-sparse-2d")
 
 
 def aee(a, b):
@@ -57,9 +53,9 @@ def noisy_pair(smooth_pair):
 
 def test_registry_lists_the_full_energy_variants():
     assert set(FULL) <= set(varflow.methods())
-    for name, cls in FULL.items():
-        assert METHODS[name].params is cls
-        assert issubclass(cls, TVL1Params) and not issubclass(cls, PlainTVL1Params)
+    for name in FULL:
+        assert METHODS[name].defaults() is PRESETS[name]
+        assert PRESETS[name].data_weight == PRESETS["tvl1"].data_weight
     assert METHODS["tvl1-tensor"].solve_warp is tensor.solve_warp
     assert all(METHODS[n].solve_warp is sp.solve_warp for n in FULL if "sparse" in n)
     assert varflow.make_params("tvl1-sparse-dct").dictionary == "dct"
@@ -76,19 +72,19 @@ def test_full_energy_defaults_are_tvl1s(name):
     """Every field of TVL1Params keeps tvl1's default (the edge weight aside for the
     tensor, which carries the edge information itself); the regulariser fields keep
     those of the plain-energy method."""
-    p, ref = FULL[name](), TVL1Params()
+    p, ref = varflow.make_params(name), TVL1Params()
     differ = {f.name for f in dataclasses.fields(TVL1Params)
               if getattr(p, f.name) != getattr(ref, f.name)}
-    assert differ == ({"edge_weight"} if name == "tvl1-tensor" else set())
+    terms = {"tensor"} | ({"sparse"} if "sparse" in name else set())
+    assert differ == ({"edge_weight"} if name == "tvl1-tensor" else set()) | terms
     assert (p.data_weight, p.gradient_weight, p.huber, p.noise_reference) == (15.0, 140.0,
                                                                             0.02, 0.01)
     assert p.grey and p.sharpness_match and p.weighted_median_radius == 3
     # the regulariser's fields keep the plain-energy method's defaults but the tensor's
-    # a, tuned on the photographic tuning split (0.5 against 3)
-    plain = METHODS[name.removeprefix("tvl1-")].params()
-    extra = {f.name for f in dataclasses.fields(p)} - {f.name for f in
-                                                      dataclasses.fields(TVL1Params)}
-    assert {k for k in extra if getattr(p, k) != getattr(plain, k)} == {"tensor_a"}
+    # a (0.5 against 3, benchmarks/HISTORY.md)
+    plain = METHODS[name.removeprefix("tvl1-")].defaults()
+    assert p.sparse == plain.sparse
+    assert p.tensor == dataclasses.replace(plain.tensor, tensor_a=0.5)
     assert (p.tensor_a, plain.tensor_a) == (0.5, 3.0)
 
 
@@ -105,18 +101,18 @@ _BAD_SPARSE = {
 @pytest.mark.parametrize("field", sorted(_BAD))
 def test_tensor_params_name_the_field(field):
     with pytest.raises(ValueError, match=f"^{field}:"):
-        tensor.TVL1TensorParams(**{field: _BAD[field]})
+        preset("tvl1-tensor", **{field: _BAD[field]})
 
 
 @pytest.mark.parametrize("field", sorted({**_BAD, **_BAD_SPARSE}))
 def test_sparse_params_name_the_field(field):
     with pytest.raises(ValueError, match=f"^{field}:"):
-        sp.TVL1Sparse2DParams(**{field: {**_BAD, **_BAD_SPARSE}[field]})
+        preset("tvl1-sparse-2d", **{field: {**_BAD, **_BAD_SPARSE}[field]})
 
 
 def test_sparse_stage_accepts_the_robust_terms():
     # refused before the sparse stage handled them (issue 27, part 6)
-    p = sp.SparseParams(gradient_weight=40.0, huber=0.02, data_normalisation=0.05)
+    p = preset("sparse-1d", gradient_weight=40.0, huber=0.02, data_normalisation=0.05)
     assert (p.gradient_weight, p.huber, p.data_normalisation) == (40.0, 0.02, 0.05)
 
 
@@ -147,7 +143,7 @@ def test_sparse_weight_zero_is_the_base_energy(regulariser, base, which, request
     sparse warps are warps of the base solver (the same schedule of warps per level),
     gradient-constancy channels, Huber-TV and the noise rule included."""
     f0, f1, _ = request.getfixturevalue(which)
-    p = sp.TVL1SparseDCTParams(
+    p = preset("tvl1-sparse-dct",
         regulariser=regulariser, sparse_weight=0.0, combined_solver="primal-dual",
         combined_coupling=0.3, combined_iterations=24, combined_tolerance=0.0, tolerance=0.0)
     stats = {}

@@ -7,11 +7,11 @@ import pytest
 
 import varflow
 from varflow.twoframe.large_displacement import (
-    LargeDisplacementParams,
     fusion_hook,
     matching_flow,
     tvl1_ld,
 )
+from varflow.twoframe.params import MatchingTerm, preset
 from varflow.twoframe.tvl1 import TVL1Params, tvl1
 
 skdata = pytest.importorskip("skimage.data")
@@ -69,7 +69,7 @@ def test_recovers_an_object_faster_than_its_size(pair):
     f0, f1, gt, valid, disc = pair
     base = tvl1(f0, f1, TVL1Params())
     stats: dict = {}
-    ld = tvl1_ld(f0, f1, LargeDisplacementParams(), stats=stats)
+    ld = tvl1_ld(f0, f1, preset("tvl1-ld"), stats=stats)
     # coarse-to-fine alone loses the disc (it takes the background's motion) ...
     assert _epe(base, gt, disc) > 20.0
     # ... the matching candidate brings it back, and the refinement keeps it (the
@@ -86,7 +86,7 @@ def test_recovers_an_object_faster_than_its_size(pair):
 
 def test_without_matches_it_is_tvl1(pair):
     f0, f1, *_ = pair
-    params = LargeDisplacementParams(min_matches=10**9)  # no candidate survives the count
+    params = preset("tvl1-ld", min_matches=10**9)  # no candidate survives the count
     stats: dict = {}
     np.testing.assert_array_equal(tvl1_ld(f0, f1, params, stats=stats), tvl1(f0, f1, params))
     assert "fusion_share" not in stats
@@ -104,8 +104,8 @@ def test_matching_flow_follows_the_object(pair):
 
 def test_interpolation_on_a_reduced_grid_still_follows_the_object(pair):
     f0, f1, gt, valid, disc = pair
-    full = matching_flow(f0, f1, LargeDisplacementParams())  # 160x224: below the limit
-    small = matching_flow(f0, f1, LargeDisplacementParams(interp_max_pixels=H * W // 4))
+    full = matching_flow(f0, f1, preset("tvl1-ld"))  # 160x224: below the limit
+    small = matching_flow(f0, f1, preset("tvl1-ld", interp_max_pixels=H * W // 4))
     assert small.shape == full.shape == (H, W, 2) and small.dtype == np.float32
     np.testing.assert_array_equal(np.isnan(small), np.isnan(full))  # same support
     inner = disc & valid & np.isfinite(small[..., 0])
@@ -124,7 +124,7 @@ def testfusion_hook_keeps_the_better_candidate():
     shift[..., 0] = 5.0  # i1 = i0 moved right by 5 px: the true flow is (5, 0)
     i1 = np.zeros_like(i0)
     i1[:, 5:] = i0[:, :-5]
-    hook = fusion_hook(shift, LargeDisplacementParams(fusion_min_size=8))
+    hook = fusion_hook(shift, preset("tvl1-ld", fusion_min_size=8))
     stats: dict = {}
     fused = hook(0, i0, i1, np.zeros((h, w, 2), np.float32), stats)
     interior = (slice(3, -3), slice(8, -3))
@@ -135,7 +135,7 @@ def testfusion_hook_keeps_the_better_candidate():
     kept = hook(0, i0, i1, shift.copy(), {})
     np.testing.assert_array_equal(kept, shift)
     # levels smaller than fusion_min_size are left alone
-    small = fusion_hook(shift, LargeDisplacementParams(fusion_min_size=100))
+    small = fusion_hook(shift, preset("tvl1-ld", fusion_min_size=100))
     zero = np.zeros((h, w, 2), np.float32)
     np.testing.assert_array_equal(small(0, i0, i1, zero, {}), zero)
 
@@ -149,13 +149,13 @@ def testfusion_hook_keeps_the_better_candidate():
 )
 def test_invalid_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
-        LargeDisplacementParams(**{field: value})
+        preset("tvl1-ld", **{field: value})
 
 
 def test_registered_with_its_pipeline():
     m = varflow.registry.get_method("tvl1-ld")
     assert m.run is tvl1_ld
-    assert isinstance(varflow.make_params("tvl1-ld"), LargeDisplacementParams)
+    assert varflow.make_params("tvl1-ld").matching == MatchingTerm()
 
 
 def test_wide_sweeps_find_a_small_fast_object(pair):

@@ -13,7 +13,7 @@ from varflow.multiframe.track import check_frames
 from varflow.multiframe.ustep import link_channels, ustep_iterations, ustep_iterations_numpy
 from varflow.ops.primal_dual import row_blocks
 from varflow.registry import make_track_params
-from varflow.twoframe.tvl1 import PlainTVL1Params
+from varflow.twoframe.params import preset
 
 
 def test_dct_basis_is_orthonormal_and_separates_u_and_v():
@@ -105,7 +105,7 @@ def test_mfsf_improves_on_independent_flows_of_its_energy_on_a_noisy_sequence(no
     # flow (twoframe with tvl1: 0.123, 2026-12-01) it gains only 4 %, which is a
     # benchmark figure, not a test bound.
     s = noisy_seq
-    two = varflow.track(s.frames, s.ref, "twoframe", flow_params=PlainTVL1Params())
+    two = varflow.track(s.frames, s.ref, "twoframe", flow_params=preset("plain"))
     mf = varflow.track(s.frames, s.ref, "mfsf", basis=basis)
     e_two, e_mf = (trajectory_errors(t, s.trajectories, s.visibility, ref=s.ref)["epe"]
                    for t in (two, mf))

@@ -20,7 +20,7 @@ from varflow import cli
 from varflow.evaluation import datasets
 from varflow.evaluation.bench import common, middlebury
 from varflow.evaluation.metrics import evaluate
-from varflow.twoframe.tvl1 import PlainTVL1Params
+from varflow.twoframe.params import preset
 
 # TV-L1 with the book's plain energy (PlainTVL1Params) on the colour frames, all 8
 # pairs: the foundation's acceptance figures.  Measured (2026-11-23): mean 0.284,
@@ -44,7 +44,7 @@ def _middlebury_aee(data_root: Path, params) -> dict[str, float]:
 
 @pytest.fixture(scope="module")
 def tvl1_middlebury_aee(data_root: Path) -> dict[str, float]:
-    return _middlebury_aee(data_root, PlainTVL1Params())
+    return _middlebury_aee(data_root, preset("plain"))
 
 
 @pytest.mark.data

@@ -322,8 +322,7 @@ def test_invalid_energy_fields_name_the_field(field, value):
 
 def test_the_energy_is_composed():
     from varflow.multiframe.params import TVL1_ENERGY
-    from varflow.twoframe.large_displacement import LargeDisplacementParams
-    from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
+    from varflow.twoframe.params import MatchingTerm, TVL1Params
 
     p = RLRParams()
     assert p.flow_method == "tvl1" and p.flow_params == TVL1_ENERGY
@@ -334,12 +333,12 @@ def test_the_energy_is_composed():
         assert getattr(TVL1_ENERGY, f) == getattr(tv, f), f
     assert RLRParams(flow_params=TVL1_ENERGY).flow_params.gradient_weight == 140
     q = make_track_params("rlr", flow_method="tvl1-ld", link_weight=1.0)
-    assert isinstance(q.flow_params, LargeDisplacementParams) and q.link_weight == 1.0
+    assert q.flow_params.matching == MatchingTerm() and q.link_weight == 1.0
     assert not q.flow_params.sharpness_match  # a method's defaults, the pair's match off
     assert make_track_params("rlr", gradient_weight=140.0).flow_params.gradient_weight == 140
     # no field is both the tracker's and the energy's
     own = {f.name for f in dataclasses.fields(RLRParams)}
-    assert not own & {f.name for f in dataclasses.fields(PlainTVL1Params)}
+    assert not own & {f.name for f in dataclasses.fields(TVL1Params)}
 
 
 def test_rlr_is_registered_and_reachable_from_the_api(small_seq):

@@ -10,8 +10,7 @@ import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.ops.primal_dual import row_blocks
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tensor import TensorParams
-from varflow.twoframe.tvl1 import PlainTVL1Params
+from varflow.twoframe.params import SparseTerm, preset
 
 
 def aee(a, b):
@@ -63,7 +62,7 @@ def test_nesterov_decreases_the_smoothed_energy_monotonically_enough(aniso):
 
 def test_without_sparse_warps_it_is_tvl1():
     f0, f1, _ = synthetic_pair("smooth", shape=(64, 80), magnitude=2.0, seed=3)
-    a = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params())
+    a = varflow.flow(f0, f1, "tvl1", params=preset("plain"))
     b = varflow.flow(f0, f1, "sparse-1d", sparse_warps=0)
     np.testing.assert_array_equal(a, b)
 
@@ -73,7 +72,7 @@ def test_sparse_approximation_of_a_smooth_flow():
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     flow = np.stack([1.5 + 0.02 * xx, -0.5 + 0.01 * yy + 0.3 * np.sin(xx / 15)], -1)
     for dictionary in ("dct", "mod"):
-        params = sp.SparseParams(dictionary=dictionary, patch_offset=3)
+        params = preset("sparse-1d", dictionary=dictionary, patch_offset=3)
         dicts = (list(sp._dct(params.layout, 10, params.n_atoms)) if dictionary == "dct"
                  else sp.learn_dictionaries(flow, params))
         approx = sp.sparse_approximation(flow.astype(np.float32), dicts, params)
@@ -83,7 +82,7 @@ def test_sparse_approximation_of_a_smooth_flow():
 
 @pytest.mark.parametrize("k", [1, 3, 4, 7])
 def test_coverage_weight_is_normalised(k):
-    params = sp.SparseParams(patch_offset=k)
+    params = preset("sparse-1d", patch_offset=k)
     c = sp.coverage_weight((57, 73), params)
     assert c.shape == (57, 73) and c.min() > 0
     interior = c[12:-12, 12:-12]
@@ -101,9 +100,9 @@ def test_sparse_methods_recover_synthetic_motion(method):
 
 
 def test_level_warps_and_activity():
-    p = sp.SparseParams(n_warps=3, sparse_warps=2, sparse_min_size=40)
+    p = preset("sparse-1d", n_warps=3, sparse_warps=2, sparse_min_size=40)
     assert p.level_warps((39, 100)) == 3 and p.level_warps((40, 100)) == 5
-    assert sp.SparseParams(sparse_warps=0).level_warps((500, 500)) == 5
+    assert preset("sparse-1d", sparse_warps=0).level_warps((500, 500)) == 5
 
 
 _BAD = {
@@ -123,12 +122,11 @@ _BAD = {
 @pytest.mark.parametrize("field", sorted(_BAD))
 def test_invalid_parameters_name_the_field(field):
     with pytest.raises(ValueError, match=f"^{field}:"):
-        sp.SparseParams(**{field: _BAD[field]})
+        preset("sparse-1d", **{field: _BAD[field]})
 
 
 def test_every_new_field_has_a_validity_test():
-    base = {f.name for f in dataclasses.fields(TensorParams)}
-    new = {f.name for f in dataclasses.fields(sp.SparseParams)} - base
+    new = {f.name for f in dataclasses.fields(SparseTerm)}
     assert new - {"seed"} <= set(_BAD)
 
 

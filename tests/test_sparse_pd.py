@@ -8,7 +8,8 @@ import varflow
 from varflow.generators.pairs import synthetic_pair
 from varflow.ops.primal_dual import row_blocks
 from varflow.twoframe import sparse as sp
-from varflow.twoframe.tvl1 import PlainTVL1Params, tvl1_iterations
+from varflow.twoframe.params import preset
+from varflow.twoframe.tvl1 import tvl1_iterations
 
 LAM, THETA, TAU, TOL = 40.0, 0.3, 0.25, 0.0
 
@@ -109,7 +110,7 @@ def test_pd_solver_in_the_method():
     assert stats["sparse_warps"] > 0
     # w ≡ 0 with TV-L1's θ: the sparse warps are TV-L1 warps (7 per level); no early
     # stop, as TV-L1's kernel tests it after every second iteration, this one after each
-    a = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params(n_warps=7, tolerance=0.0))
+    a = varflow.flow(f0, f1, "tvl1", params=preset("plain", n_warps=7, tolerance=0.0))
     b = varflow.flow(f0, f1, "sparse-1d", n_warps=5, sparse_warps=2, sparse_min_size=10,
                      combined_solver="primal-dual", sparse_weight=0.0, combined_coupling=0.3,
                      tolerance=0.0, combined_tolerance=0.0, combined_iterations=50)
@@ -118,10 +119,10 @@ def test_pd_solver_in_the_method():
 
 def test_combined_solver_is_validated():
     with pytest.raises(ValueError, match="^combined_solver:"):
-        sp.SparseParams(combined_solver="admm")
+        preset("sparse-1d", combined_solver="admm")
     with pytest.raises(ValueError, match="^combined_iterations:"):
-        sp.SparseParams(combined_iterations=0)
+        preset("sparse-1d", combined_iterations=0)
     with pytest.raises(ValueError, match="^combined_coupling:"):
-        sp.SparseParams(combined_coupling=0.0)
+        preset("sparse-1d", combined_coupling=0.0)
     with pytest.raises(ValueError, match="^combined_tolerance:"):
-        sp.SparseParams(combined_tolerance=-1.0)
+        preset("sparse-1d", combined_tolerance=-1.0)

@@ -9,8 +9,9 @@ from varflow.ops.differences import image_derivatives
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe import tensor as tensor_mod
 from varflow.twoframe.coarse_to_fine import LevelState
-from varflow.twoframe.tensor import TensorParams, diffusion_tensor
-from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
+from varflow.twoframe.params import TensorTerm, preset
+from varflow.twoframe.tensor import diffusion_tensor
+from varflow.twoframe.tvl1 import TVL1Params
 
 
 def aee(a, b):
@@ -47,7 +48,7 @@ def test_tensor_with_a_zero_is_exactly_identity():
 
 def test_identity_tensor_gives_the_isotropic_flow():
     f0, f1, _ = synthetic_pair("smooth", shape=(96, 128), magnitude=3.0, channels=3, seed=1)
-    iso = varflow.flow(f0, f1, "tvl1", params=PlainTVL1Params(edge_weight=10.0))
+    iso = varflow.flow(f0, f1, "tvl1", params=preset("plain", edge_weight=10.0))
     ident = varflow.flow(f0, f1, "tensor", tensor_a=0.0, edge_weight=10.0)
     # same iterations through the anisotropic branch of the kernel: rounding only
     assert np.abs(iso - ident).max() < 1e-3
@@ -58,7 +59,7 @@ def test_tensor_engines_agree():
     dx, dy = image_derivatives(f1)
     flow0 = (0.8 * gt).astype(np.float32)
     warped, inside = warp_bicubic(np.concatenate([f1, dx, dy], 2), flow0)
-    params = TensorParams(max_iterations=40, tolerance=0.0, tensor_a=5.0)
+    params = preset("tensor", max_iterations=40, tolerance=0.0, tensor_a=5.0)
     outs = []
     for engine in ("numba", "numpy"):
         outs.append(tensor_mod.solve_warp(f0, warped[..., :3], warped[..., 3:6], warped[..., 6:],
@@ -80,11 +81,11 @@ def test_tensor_recovers_synthetic_motion(motion, magnitude, bound):
                                           ("tensor_sigma", -0.5)])
 def test_invalid_tensor_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"^{field}:"):
-        TensorParams(**{field: value})
+        preset("tensor", **{field: value})
 
 
 def test_registered_with_its_own_defaults():
     assert "tensor" in varflow.methods()
     p = varflow.make_params("tensor")
-    assert isinstance(p, TensorParams) and isinstance(p, TVL1Params)
+    assert isinstance(p, TVL1Params) and p.tensor == TensorTerm()
     assert p.edge_weight == 0.0 and p.tensor_a > 0

@@ -58,16 +58,15 @@ def test_twoframe_is_a_loop_of_varflow_flow(kw):
 
 def test_composed_tracker_parameters():
     from varflow.registry import make_track_params
-    from varflow.twoframe.large_displacement import LargeDisplacementParams
-    from varflow.twoframe.tvl1 import TVL1Params
+    from varflow.twoframe.params import MatchingTerm, TVL1Params
 
     p = make_track_params("twoframe")
     assert p.flow_method == "tvl1" and p.flow_params == TVL1Params()
     q = make_track_params("twoframe", flow_method="tvl1-ld", n_warps=2)
-    assert isinstance(q.flow_params, LargeDisplacementParams) and q.flow_params.n_warps == 2
+    assert q.flow_params.matching == MatchingTerm() and q.flow_params.n_warps == 2
     # a new method starts from its own defaults; the tracker's other fields are kept
     r = make_track_params("twoframe", q, flow_method="tvl1")
-    assert type(r.flow_params) is TVL1Params and r.flow_params.n_warps == 4
+    assert r.flow_params == TVL1Params() and r.flow_params.n_warps == 4
     with pytest.raises(ValueError, match="^flow_method:"):
         make_track_params("chain", flow_method="nope")
     with pytest.raises(ValueError, match="^flow_params:"):

@@ -10,8 +10,8 @@ from varflow.generators.pairs import TextureField, synthetic_pair
 from varflow.ops.primal_dual import NO_TENSOR, row_blocks
 from varflow.ops.warp import warp_bicubic
 from varflow.twoframe.coarse_to_fine import LevelState
+from varflow.twoframe.params import preset
 from varflow.twoframe.tvl1 import (
-    PlainTVL1Params,
     TVL1Params,
     linearise,
     linearise_numpy,
@@ -65,7 +65,7 @@ def test_grey_input_forms_agree():
 
 def test_colour_with_equal_channels_matches_grey_with_tripled_weight():
     f0, f1, _ = synthetic_pair("smooth", shape=(64, 80), magnitude=2.0, channels=1, seed=4)
-    plain = PlainTVL1Params()
+    plain = preset("plain")
     grey = varflow.flow(f0, f1, params=plain.replace(data_weight=3 * plain.data_weight))
     colour = varflow.flow(np.repeat(f0, 3, 2), np.repeat(f1, 3, 2), params=plain)
     assert aee(grey, colour) < 0.01
@@ -100,7 +100,7 @@ def test_colour_term_uses_chroma_not_grey_conversion():
     f0 = render(xx, yy)
     f1 = render(xx - shift[0], yy - shift[1])
     assert np.ptp(f0.mean(-1)) < 1e-6  # grey conversion loses everything
-    flow = varflow.flow(f0, f1, params=PlainTVL1Params())
+    flow = varflow.flow(f0, f1, params=preset("plain"))
     gt = np.broadcast_to(shift, (h, w, 2))
     assert aee(flow, gt) < 0.1
     assert aee(varflow.flow(f0, f1, grey=False), gt) < 0.1
@@ -168,15 +168,16 @@ def test_invalid_parameter_names_the_field(field):
 
 def test_every_parameter_has_a_validity_test():
     # the booleans have no invalid value
+    # (the optional terms are checked in tests/test_parameters.py and with their methods)
     assert {f.name for f in dataclasses.fields(TVL1Params)} <= set(_BAD_VALUES) | {
         "structure_texture", "sharpness_match", "gradient_grey", "grey",
-        "weighted_median_every_warp",
+        "weighted_median_every_warp", "tensor", "sparse", "matching",
     }
 
 
 def test_registry_and_api():
     assert "tvl1" in varflow.methods()
-    assert varflow.METHODS["tvl1"].params is TVL1Params
+    assert varflow.METHODS["tvl1"].params_type is TVL1Params
     p = varflow.make_params("tvl1", n_warps=3)
     assert p.n_warps == 3 and p.data_weight == TVL1Params().data_weight
 
@@ -236,9 +237,7 @@ def test_linearise_engines_agree_on_the_drivers_strided_views():
 
 
 def test_fast_preset_does_less_work_and_stays_accurate():
-    from varflow.twoframe.tvl1 import TVL1FastParams
-
-    assert varflow.METHODS["tvl1-fast"].params is TVL1FastParams
+    assert varflow.FLOW["tvl1-fast"].defaults() == preset("fast")
     f0, f1, gt = synthetic_pair("smooth", shape=(96, 128), magnitude=3.0, channels=3, seed=1)
     full: dict = {}
     fast: dict = {}
@@ -252,7 +251,7 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     from varflow.generators.photo_pairs import make_photo_pair
 
     p = make_photo_pair("affine", 1)
-    params = PlainTVL1Params(noise_reference=0.01)
+    params = preset("plain", noise_reference=0.01)
     stats: dict = {}
     assert params.for_frames(p.frame0, p.frame1, stats) is params  # clean: unchanged
     assert stats["data_scale"] == 1.0 and stats["noise_sigma"] < 0.008
@@ -260,7 +259,7 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     noisy = [np.clip(f + rng.normal(0, 0.03, f.shape), 0, 1).astype(np.float32)
              for f in (p.frame0, p.frame1)]
     stats = {}
-    q = PlainTVL1Params(noise_reference=0.01, gradient_weight=20.0).for_frames(*noisy, stats)
+    q = preset("plain", noise_reference=0.01, gradient_weight=20.0).for_frames(*noisy, stats)
     assert 0.026 < stats["noise_sigma"] < 0.034  # the added noise, not the texture
     assert q.data_weight == pytest.approx(40.0 * stats["data_scale"])
     assert q.gradient_weight == pytest.approx(20.0 * stats["data_scale"])
@@ -269,7 +268,7 @@ def test_noise_rule_weakens_the_data_term_on_noisy_frames_only():
     errs = []
     for ref in (0.0, 0.01):
         st: dict = {}
-        flow = varflow.flow(*noisy, params=PlainTVL1Params(noise_reference=ref), stats=st)
+        flow = varflow.flow(*noisy, params=preset("plain", noise_reference=ref), stats=st)
         errs.append(float(np.linalg.norm(flow - p.flow, axis=-1)[p.valid].mean()))
         assert ("data_scale" in st) == (ref > 0)
     assert errs[1] < 0.6 * errs[0]

@@ -14,7 +14,8 @@ from varflow.ops.median import (
     weighted_median_flow_numpy,
 )
 from varflow.twoframe.coarse_to_fine import filter_flow, noise_adapted
-from varflow.twoframe.tvl1 import PlainTVL1Params, TVL1Params
+from varflow.twoframe.params import preset
+from varflow.twoframe.tvl1 import TVL1Params
 
 
 def _random_case(seed, shape=(23, 31)):
@@ -168,7 +169,7 @@ def test_params_name_the_bad_field(field, value):
 
 def test_defaults():
     assert TVL1Params().weighted_median_radius == 3
-    assert PlainTVL1Params().weighted_median_radius == 0
+    assert preset("plain").weighted_median_radius == 0
     assert not TVL1Params().weighted_median_every_warp
     assert RLRParams().flow_params.weighted_median_radius == 3
     assert TVL1Params().weighted_median_noise == 5.0
@@ -212,7 +213,7 @@ def test_noise_rule_widens_the_colour_sigma():
         pytest.approx(np.hypot(0.05, 0.05)))
     assert noise_adapted(p.replace(weighted_median_noise=0.0), (noisy,)) == p.replace(
         weighted_median_noise=0.0)
-    assert noise_adapted(PlainTVL1Params(), (noisy,)) == PlainTVL1Params()
+    assert noise_adapted(preset("plain"), (noisy,)) == preset("plain")
 
 
 def _pair(seed=3, shape=(64, 80)):

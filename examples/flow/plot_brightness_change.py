@@ -14,7 +14,7 @@ import numpy as np
 
 import varflow
 from varflow.generators.photo_pairs import make_photo_pair
-from varflow.twoframe.tvl1 import PlainTVL1Params
+from varflow.twoframe.params import preset
 
 pair = make_photo_pair("illumination", seed=100, shape=(192, 256))
 gt = np.where(pair.valid[..., None], pair.flow, np.nan).astype(np.float32)
@@ -25,7 +25,7 @@ runs = {
     "tvl1 (default)": varflow.flow(pair.frame0, pair.frame1),
     "tvl1, gradient_weight=0": varflow.flow(pair.frame0, pair.frame1, gradient_weight=0.0),
     "plain TV-L1 (the book)": varflow.flow(pair.frame0, pair.frame1,
-                                           params=PlainTVL1Params()),
+                                           params=preset("plain")),
 }
 aee = {name: varflow.evaluate(flow, gt)["aee"] for name, flow in runs.items()}
 for name, value in aee.items():

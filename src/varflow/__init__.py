@@ -29,6 +29,14 @@ the call) from their common range [min, max] to [0, 1]; a constant frame gives
 zero flow; NaN or inf is an error naming the frame.  Before running, the memory
 the call needs is estimated and compared with the memory available
 (:mod:`varflow._memory`; ``VARFLOW_MEMORY_LIMIT`` overrides the latter).
+
+Layout: every method is an entry of one of the registries of :mod:`varflow.registry`
+(``FLOW``, ``TRACK``, ``INTERPOLATE``), registered by the ``methods`` module of its
+package (:mod:`varflow.twoframe`, :mod:`varflow.multiframe`, :mod:`varflow.retime`);
+parameters are frozen dataclasses composed of smaller ones (:mod:`varflow.parameters`,
+:mod:`varflow.twoframe.params`); the two-frame solvers plug into the one coarse-to-fine
+driver (:mod:`varflow.twoframe.coarse_to_fine`); kernels live in :mod:`varflow.ops`.
+The documentation's developer page (``docs/guide/architecture.md``) draws it.
 """
 
 from __future__ import annotations
@@ -38,7 +46,17 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
+from .registry import (
+    FLOW,
+    INTERPOLATE,
+    METHODS,
+    TRACK,
+    TRACKERS,
+    get_method,
+    get_tracker,
+    make_params,
+    make_track_params,
+)
 from .twoframe.coarse_to_fine import ProgressCallback
 from .twoframe.methods import DEFAULT_METHOD, run_method
 
@@ -52,6 +70,9 @@ __all__ = [
     "TRACKERS",
     "make_params",
     "METHODS",
+    "FLOW",
+    "TRACK",
+    "INTERPOLATE",
     "read_flo",
     "write_flo",
     "read_kitti_png",
@@ -74,13 +95,13 @@ __all__ = [
 
 
 def methods() -> list[str]:
-    """Names of the registered two-frame methods (see :data:`varflow.registry.METHODS`)."""
-    return sorted(METHODS)
+    """Names of the registered two-frame methods (see :data:`varflow.registry.FLOW`)."""
+    return FLOW.names()
 
 
 def track_methods() -> list[str]:
-    """Names of the registered trajectory methods (see :data:`varflow.registry.TRACKERS`)."""
-    return sorted(TRACKERS)
+    """Names of the registered trajectory methods (see :data:`varflow.registry.TRACK`)."""
+    return TRACK.names()
 
 
 def track(
@@ -155,22 +176,20 @@ def track(
     if visible is None:
         from .multiframe.propagate import frame_pyramids
         from .multiframe.visibility import estimate_visibility
-        from .twoframe.tvl1 import TVL1Params
+        from .twoframe.params import PRESETS, TVL1Params
 
         # the backward flows are TV-L1 with the tracker's two-frame parameters when
         # those are TV-L1's (every registered method's derive from them)
         fp = getattr(p, "flow_params", p)
-        fp = fp if isinstance(fp, TVL1Params) else TVL1Params()
+        fp = fp if isinstance(fp, TVL1Params) else PRESETS["tvl1"]
         visible = estimate_visibility(traj, r, frame_pyramids(arr, fp), fp)
     return traj, visible
 
 
 def interpolation_methods() -> list[str]:
     """Names of the registered frame-interpolation methods
-    (see :data:`varflow.retime.methods.INTERPOLATORS`)."""
-    from .retime.methods import INTERPOLATORS
-
-    return sorted(INTERPOLATORS)
+    (see :data:`varflow.registry.INTERPOLATE`)."""
+    return INTERPOLATE.names()
 
 
 def interpolate(frame0: np.ndarray, frame1: np.ndarray, t: Any = 0.5, method: str | None = None,

@@ -19,7 +19,7 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["COMPILE_SECONDS", "FASTMATH", "FASTMATH_NAN", "FASTMATH_NO_REASSOC", "compile_seconds",
+__all__ = ["FASTMATH", "FASTMATH_NAN", "FASTMATH_NO_REASSOC", "compile_seconds",
            "kernels_cached", "method_kernels"]
 
 log = logging.getLogger(__name__)
@@ -49,59 +49,29 @@ FASTMATH_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 #: Kernels (``"module:function"``) every two-frame and trajectory method compiles.
 SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_kernel")
 
-#: Representative kernels of each method beyond :data:`SHARED_KERNELS` (a method
-#: not listed is judged by the shared ones).
-METHOD_KERNELS: dict[str, tuple[str, ...]] = {
-    "tvl1": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.ops.median:_weighted_median_kernel"),
-    "tvl1-fast": ("varflow.twoframe.tvl1:tvl1_iterations",),
-    "tvl1-ld": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.ops.matching:_patchmatch_pair",
-                "varflow.ops.interpolation:_fit_kernel"),
-    "tensor": ("varflow.twoframe.tvl1:tvl1_iterations",),
-    "sparse-*": ("varflow.twoframe.sparse:nesterov_iterations",
-                 "varflow.sparse.omp:_batch_omp_kernel"),
-    "tvl1-tensor": ("varflow.twoframe.tvl1:tvl1_iterations",
-                    "varflow.ops.median:_weighted_median_kernel"),
-    "tvl1-sparse-*": ("varflow.twoframe.sparse:nesterov_iterations",
-                      "varflow.sparse.omp:_batch_omp_kernel",
-                      "varflow.ops.median:_weighted_median_kernel"),
-    "rlr": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.multiframe.rlr:ustep_iterations",
-            "varflow.multiframe.lowrank:_l1_kernel"),
-    "mfsf": ("varflow.twoframe.tvl1:tvl1_iterations", "varflow.multiframe.rlr:ustep_iterations"),
-    "twoframe": ("varflow.twoframe.tvl1:tvl1_iterations",),
-    "chain": ("varflow.twoframe.tvl1:tvl1_iterations",),
-}
+def _entry(method: str) -> Any:
+    """The registry entry named ``method`` (two-frame, trajectory or interpolation), or
+    None."""
+    from .registry import FLOW, INTERPOLATE, TRACK
 
-#: Rough seconds the first run of each method spends compiling on a cold cache (the
-#: first call on a small input with an empty cache, 2-core development machine).
-COMPILE_SECONDS: dict[str, int] = {
-    "tvl1": 40, "tvl1-fast": 35, "tvl1-ld": 60, "tensor": 35, "sparse-*": 60,
-    # not timed on a cold cache: tvl1's kernels, and sparse-*'s plus the weighted median
-    "tvl1-tensor": 40, "tvl1-sparse-*": 65,
-    "rlr": 80, "mfsf": 70, "twoframe": 35, "chain": 40,
-}
-
-
-def _lookup(table: dict[str, Any], method: str) -> Any:
-    """``table[method]``, or the entry of its family (``"sparse-*"``, the longest such
-    prefix first: ``"tvl1-sparse-*"`` for ``tvl1-sparse-1d``); None if neither."""
-    if method in table:
-        return table[method]
-    parts = method.split("-")
-    for k in range(len(parts) - 1, 0, -1):
-        family = "-".join(parts[:k]) + "-*"
-        if family in table:
-            return table[family]
+    for registry in (FLOW, TRACK, INTERPOLATE):
+        if method in registry:
+            return registry[method]
     return None
 
 
 def method_kernels(method: str) -> tuple[str, ...]:
-    """The kernels :func:`kernels_cached` checks for ``method`` (``"module:function"``)."""
-    return SHARED_KERNELS + tuple(_lookup(METHOD_KERNELS, method) or ())
+    """The kernels :func:`kernels_cached` checks for ``method`` (``"module:function"``):
+    :data:`SHARED_KERNELS` and the entry's own (:attr:`varflow.registry.Entry.kernels`)."""
+    entry = _entry(method)
+    return SHARED_KERNELS + (tuple(entry.kernels) if entry is not None else ())
 
 
 def compile_seconds(method: str) -> int | None:
-    """Rough seconds the first run of ``method`` spends compiling (None if unknown)."""
-    return _lookup(COMPILE_SECONDS, method)
+    """Rough seconds the first run of ``method`` spends compiling
+    (:attr:`varflow.registry.Entry.compile_seconds`; None if unknown)."""
+    entry = _entry(method)
+    return None if entry is None else entry.compile_seconds
 
 
 def _cached(dispatcher: Any) -> bool | None:

@@ -19,8 +19,8 @@ resetting it with ``/proc/self/clear_refs`` once the JIT had compiled on a small
 input), minus the resident memory before the call; ``uint8`` inputs created before
 the baseline, default parameters, ``NUMBA_NUM_THREADS=1``.  Two-frame methods at
 256x320 and 512x640 grey and 256x320 RGB; trackers at 128x160 and 256x320 with
-5 frames, 128x160 with 9 frames and 128x160 RGB with 5 frames (varflow 0.1.0,
-2026-11-30).  Measured peaks, bytes per pixel (grey; RGB):
+5 frames, 128x160 with 9 frames and 128x160 RGB with 5 frames
+(``benchmarks/bench_memory.py``).  Measured peaks, bytes per pixel (grey; RGB):
 
 =============  ==================  ====================  ==================
 method         256x320             512x640               RGB 256x320
@@ -46,7 +46,8 @@ twoframe       154           176           207           352
 
 The model fitted to them is ``fixed + pixels * (base + per_frame * F +
 per_channel * (C - 1) * F')`` with ``F' = 1`` for two-frame methods and ``F' = F``
-for trackers (see :data:`FACTORS`), times a safety margin :data:`MARGIN`.  The
+for trackers (each registry entry's :class:`~varflow.registry.MemoryFactors`),
+times a safety margin :data:`MARGIN`.  The
 sparse methods carry 5-16 MiB that does not grow with the image (dictionary,
 Gram matrices), hence their higher cost per pixel on small images.
 """
@@ -58,13 +59,13 @@ import math
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .registry import FLOW, TRACK, Entry, MemoryFactors
+
 __all__ = [
     "ENV_VAR",
-    "FACTORS",
     "InsufficientMemoryError",
     "MemoryFactors",
     "available_bytes",
@@ -81,45 +82,6 @@ _MIB = 2**20
 _GIB = 2**30
 
 
-@dataclass(frozen=True)
-class MemoryFactors:
-    """Peak-memory model of one method: ``fixed + pixels * per-pixel bytes``.
-
-    Attributes
-    ----------
-    base : float
-        Bytes per pixel independent of the number of frames (grey).
-    per_frame : float
-        Bytes per pixel and frame (trackers; 0 for two-frame methods, whose two
-        frames are part of ``base``).
-    per_channel : float
-        Extra bytes per pixel for each colour channel beyond the first (per frame
-        for trackers).
-    fixed : float
-        Bytes that do not grow with the image.
-    """
-
-    base: float
-    per_frame: float = 0.0
-    per_channel: float = 0.0
-    fixed: float = 0.0
-
-
-#: Fitted factors per method (see the module docstring for the measurements).
-FACTORS: dict[str, MemoryFactors] = {
-    "tvl1": MemoryFactors(base=150, per_channel=75),
-    "tvl1-fast": MemoryFactors(base=125, per_channel=50),
-    "tensor": MemoryFactors(base=200, per_channel=80),
-    "sparse-1d": MemoryFactors(base=255, per_channel=55, fixed=16 * _MIB),
-    "sparse-2d": MemoryFactors(base=280, per_channel=45, fixed=8 * _MIB),
-    "sparse-2x1d": MemoryFactors(base=250, per_channel=55, fixed=5 * _MIB),
-    "sparse-dct": MemoryFactors(base=275, per_channel=65, fixed=10 * _MIB),
-    "tvl1-ld": MemoryFactors(base=455, per_channel=30),
-    "rlr": MemoryFactors(base=45, per_frame=145, per_channel=32),
-    "mfsf": MemoryFactors(base=145, per_frame=135, per_channel=26),
-    "chain": MemoryFactors(base=110, per_frame=14, per_channel=21),
-    "twoframe": MemoryFactors(base=110, per_frame=14, per_channel=20),
-}
 #: Used for a method without measured factors: the largest of each kind.
 _FALLBACK = {
     "flow": MemoryFactors(base=455, per_channel=80, fixed=16 * _MIB),
@@ -142,9 +104,15 @@ def _is_tracker(name: str) -> bool:
         return True
     if name == "flow":
         return False
-    from .registry import TRACKERS
+    return name in TRACK
 
-    return name in TRACKERS
+
+def _factors(method_or_kind: Any, name: str, tracker: bool) -> MemoryFactors:
+    """The entry's :class:`~varflow.registry.MemoryFactors`, else the largest of its kind."""
+    entry = method_or_kind if isinstance(method_or_kind, Entry) else \
+        (TRACK if tracker else FLOW).get(name)
+    memory = getattr(entry, "memory", None)
+    return memory if memory is not None else _FALLBACK["track" if tracker else "flow"]
 
 
 def estimate_bytes(
@@ -177,7 +145,7 @@ def estimate_bytes(
     del params  # reserved: the measured factors are those of the default parameters
     name = _name(method_or_kind)
     tracker = _is_tracker(name)
-    factors = FACTORS.get(name) or _FALLBACK["track" if tracker else "flow"]
+    factors = _factors(method_or_kind, name, tracker)
     dims = tuple(int(s) for s in shape)
     if len(dims) not in (2, 3):
         raise ValueError(f"estimate_bytes: shape must be (H, W) or (H, W, C), got {dims}")

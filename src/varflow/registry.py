@@ -1,35 +1,60 @@
-"""The method registries: plain dicts that the API, the CLI and the benchmarks read.
+"""The registries: one kind of object for every kind of method.
 
-:data:`METHODS` (defined in :mod:`varflow.twoframe.methods`, re-exported here) maps a
-two-frame method name to a :class:`Method`: its frozen parameter dataclass, its
-single-level warp solver, a one-line description and, for a method with stages
-around the driver (``tvl1-ld``), the function that runs it.
-:data:`TRACKERS` maps a multi-frame (trajectory) method name to a :class:`Tracker`:
-its parameter dataclass and its ``track(frames, ref, params, callback)`` function.
+Each kind of method has one :class:`Registry` that the API, the CLI, the benchmarks and
+the documentation read:
 
-A tracker built on a two-frame method (``twoframe``, ``chain``) composes that
-method's parameter object (its field ``flow_params``); :func:`make_track_params`
-routes an override that is not one of the tracker's own fields to it.
+========================  =====================  =========================================
+registry                  entries                registered in
+========================  =====================  =========================================
+:data:`FLOW`              :class:`Method`        :mod:`varflow.twoframe.methods`
+:data:`TRACK`             :class:`Tracker`       :mod:`varflow.multiframe.methods`
+:data:`INTERPOLATE`       :class:`Interpolator`  :mod:`varflow.retime.methods`
+========================  =====================  =========================================
+
+An entry carries everything known about a method under its name: a one-line
+description, the factory of its default parameters (a frozen dataclass, see
+:mod:`varflow.parameters`), its peak-memory model (:class:`MemoryFactors`, read by
+:mod:`varflow._memory`), the Numba kernels its first run compiles and a rough
+compile time (read by :mod:`varflow._jit`), and the functions that run it.  Adding a
+method is one :meth:`Registry.register` call in the module of its kind; a registry
+imports that module on its first lookup.
+
+:meth:`Registry.make_params` builds a method's parameters from its defaults, an
+existing object and flat overrides, each routed to the parameter object that owns
+it (a tracker's ``data_weight`` goes to its two-frame energy, a sparse method's
+``tensor_a`` to its tensor term).  :meth:`Registry.fields` lists those flat names,
+their defaults and the class that documents each: the CLI's flags and ``--params``
+tables.
+
+The former names stay: :data:`METHODS`, :data:`TRACKERS` and
+``varflow.retime.methods.INTERPOLATORS`` are the registries themselves;
+:func:`make_params`, :func:`make_track_params`, :func:`get_method`,
+:func:`get_tracker` and :func:`parameter_fields` call them.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
+from collections.abc import Callable, Iterator, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
-from .multiframe import mfsf as _mfsf
-from .multiframe import rlr as _rlr
-from .multiframe import track as _track
-from .twoframe.coarse_to_fine import CoarseToFineParams
-from .twoframe.methods import DEFAULT_METHOD, METHODS, Method, get_method
+from .parameters import UnknownParameter, flat_fields
 
 __all__ = [
     "DEFAULT_METHOD",
-    "Method",
+    "Entry",
+    "FLOW",
+    "INTERPOLATE",
+    "Interpolator",
     "METHODS",
-    "Tracker",
+    "MemoryFactors",
+    "Method",
+    "Registry",
+    "TRACK",
     "TRACKERS",
+    "Tracker",
     "get_method",
     "get_tracker",
     "make_params",
@@ -37,135 +62,318 @@ __all__ = [
     "parameter_fields",
 ]
 
+#: The method of :func:`varflow.flow` when none is named, and of the trackers and
+#: interpolators built on two-frame flows unless they name another.
+DEFAULT_METHOD = "tvl1"
+
 
 @dataclass(frozen=True)
-class Tracker:
-    """A registered multi-frame (trajectory) method.
+class MemoryFactors:
+    """Peak-memory model of one method: ``fixed + pixels * per-pixel bytes``.
+
+    See :mod:`varflow._memory` for how the factors are measured and used.
+
+    Attributes
+    ----------
+    base : float
+        Bytes per pixel independent of the number of frames (grey).
+    per_frame : float
+        Bytes per pixel and frame (trackers; 0 for two-frame methods, whose two
+        frames are part of ``base``).
+    per_channel : float
+        Extra bytes per pixel for each colour channel beyond the first (per frame
+        for trackers).
+    fixed : float
+        Bytes that do not grow with the image.
+    """
+
+    base: float
+    per_frame: float = 0.0
+    per_channel: float = 0.0
+    fixed: float = 0.0
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A registered method, of any kind.
 
     Attributes
     ----------
     name : str
-    params : type
-        Frozen dataclass of its parameters.
+        The name users pass (``varflow.flow(..., "tvl1")``, ``--method tvl1``).
+    description : str
+        One line for listings (``varflow methods``, the documentation).
+    defaults : callable
+        ``defaults() -> params``: the method's default parameters, a frozen dataclass.
+    memory : MemoryFactors or None
+        Its measured peak-memory model; None: the largest of its kind.
+    kernels : tuple of str
+        ``"module:function"`` of the Numba kernels its first run compiles (beyond
+        those every method compiles), to tell whether Numba's cache holds them.
+    compile_seconds : int or None
+        Rough seconds its first run spends compiling on a cold cache.
+    """
+
+    name: str
+    description: str
+    defaults: Callable[[], Any]
+    memory: MemoryFactors | None = None
+    kernels: tuple[str, ...] = ()
+    compile_seconds: int | None = None
+
+    @property
+    def params_type(self) -> type:
+        """The class of the method's parameters."""
+        return type(self.defaults())
+
+    def check_params(self, params: Any) -> None:
+        """Raise ``ValueError`` (naming ``params``) unless ``params`` suits the method."""
+        if not isinstance(params, self.params_type):
+            raise ValueError(f"params: expected {self.params_type.__name__} for "
+                             f"{self.name!r}, got {type(params).__name__}")
+
+
+@dataclass(frozen=True)
+class Method(Entry):
+    """A two-frame flow method (:data:`FLOW`).
+
+    Its parameters are a :class:`~varflow.twoframe.params.TVL1Params` with exactly the
+    optional terms of its defaults (``tensor``, ``sparse``, ``matching``).
+
+    Attributes
+    ----------
+    solve_warp : callable
+        The single-level, single-warp solver plugged into
+        :func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`.
+    run : callable or None
+        ``run(frame0, frame1, params, init_flow=None, callback=None, stats=None)``
+        for a method whose pipeline has stages around the driver (which it calls
+        with ``solve_warp``); None: the driver alone.
+    """
+
+    solve_warp: Callable[..., Any] | None = None
+    run: Callable[..., Any] | None = None
+
+    def check_params(self, params: Any) -> None:
+        super().check_params(params)
+        want, got = self.defaults().terms(), params.terms()
+        if want != got:
+            raise ValueError(
+                f"params: {self.name!r} takes the terms {sorted(want) or 'none'}, "
+                f"got {sorted(got) or 'none'}")
+
+
+@dataclass(frozen=True)
+class Tracker(Entry):
+    """A multi-frame (trajectory) method (:data:`TRACK`).
+
+    Attributes
+    ----------
     track : callable
         ``track(frames, ref, params, callback, stats=None) -> (F, H, W, 2)`` with
         ``frames`` as returned by :func:`varflow.multiframe.track.check_frames`;
         ``stats`` (a dict) may gain ``visible``, the ``(F, H, W)`` bool visibility
         when the method estimates it.
-    description : str
     """
 
-    name: str
-    params: type
-    track: Any
-    description: str
+    track: Callable[..., Any] | None = None
 
 
-TRACKERS: dict[str, Tracker] = {
-    "rlr": Tracker(
-        name="rlr",
-        params=_rlr.RLRParams,
-        track=_rlr.track_rlr,
-        description="robust low-rank trajectories (data + TV_g + nuclear norm + L1 link)",
-    ),
-    "mfsf": Tracker(
-        name="mfsf",
-        params=_mfsf.MFSFParams,
-        track=_mfsf.track_mfsf,
-        description="multi-frame subspace flow (Garg et al.): soft constraint to a PCA/DCT "
-        "trajectory basis",
-    ),
-    "twoframe": Tracker(
-        name="twoframe",
-        params=_track.TwoFrameTrackParams,
-        track=_track.track_twoframe,
-        description="independent two-frame flows (varflow.flow) from the reference to every "
-        "frame",
-    ),
-    "chain": Tracker(
-        name="chain",
-        params=_track.ChainTrackParams,
-        track=_track.track_chain,
-        description="two-frame flows (varflow.flow) between consecutive frames, composed "
-        "along the trajectory",
-    ),
-}
+@dataclass(frozen=True)
+class Interpolator(Entry):
+    """A frame-interpolation method (:data:`INTERPOLATE`).
+
+    Attributes
+    ----------
+    prepare : callable
+        ``prepare(frame0, frame1, params, previous=None, following=None,
+        callback=None, stats=None, cache=None) -> PairMotion``; frames (H, W, C)
+        float32 as :class:`~varflow.retime.motion.PairMotion` holds them;
+        ``previous`` / ``following`` the frames before ``frame0`` and after
+        ``frame1`` when the caller has them (methods with ``context`` 1 use them,
+        the others ignore them); ``cache`` a
+        :class:`~varflow.retime.motion.FlowCache` through which the flows are
+        estimated.
+    context : int
+        Frames each side of the pair the method can use (0 or 1).
+    """
+
+    prepare: Callable[..., Any] | None = None
+    context: int = 0
+
+
+class Registry(MutableMapping):
+    """The methods of one kind, by name, in registration order.
+
+    A mapping ``name -> entry`` (``registry["tvl1"]``, ``"tvl1" in registry``,
+    ``sorted(registry)``) with the operations every kind shares.  Entries are added
+    by :meth:`register`; item assignment and deletion (e.g. a test's temporary
+    method) take an entry of the registry's type under its own name.
+
+    Parameters
+    ----------
+    kind : str
+        What its entries are called in messages (``"method"``, ``"trajectory
+        method"``...).
+    entry_type : type
+        The :class:`Entry` subclass of its entries.
+    source : str
+        The module that registers the entries, imported on the first lookup.
+    """
+
+    def __init__(self, kind: str, entry_type: type[Entry], source: str) -> None:
+        self.kind = kind
+        self.entry_type = entry_type
+        self.source = source
+        self._entries: dict[str, Entry] = {}
+        self._loaded = False
+
+    def _load(self) -> dict[str, Entry]:
+        if not self._loaded:
+            self._loaded = True
+            importlib.import_module(self.source)
+        return self._entries
+
+    def register(self, entry: Entry) -> Entry:
+        """Add ``entry`` (of :attr:`entry_type`, with a new name) and return it."""
+        if not isinstance(entry, self.entry_type):
+            raise TypeError(f"expected a {self.entry_type.__name__}, got {type(entry).__name__}")
+        if entry.name in self._entries:
+            raise ValueError(f"{self.kind} {entry.name!r} is already registered")
+        self._entries[entry.name] = entry
+        return entry
+
+    def __getitem__(self, name: str) -> Entry:
+        return self._load()[name]
+
+    def __setitem__(self, name: str, entry: Entry) -> None:
+        if not isinstance(entry, self.entry_type) or entry.name != name:
+            raise ValueError(f"{self.kind} {name!r}: expected a {self.entry_type.__name__} "
+                             f"named {name!r}")
+        self._load()[name] = entry
+
+    def __delitem__(self, name: str) -> None:
+        del self._load()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+    def __repr__(self) -> str:
+        return f"Registry({self.kind!r}: {', '.join(self._load())})"
+
+    def get(self, name: Any, default: Any = None) -> Any:  # type: ignore[override]
+        """``self[name]``, or ``default`` for a name that is not registered."""
+        try:
+            return self._load()[name]
+        except (KeyError, TypeError):
+            return default
+
+    def entry(self, method: str | Entry) -> Entry:
+        """The entry named ``method`` (an entry is returned as is).
+
+        Raises
+        ------
+        ValueError
+            ``"method: unknown <kind> ...; available: ..."`` for an unknown name.
+        """
+        if isinstance(method, Entry):
+            return method
+        found = self.get(method)
+        if found is None:
+            raise ValueError(f"method: unknown {self.kind} {method!r}; available: "
+                             f"{', '.join(self.names())}")
+        return found
+
+    def names(self) -> list[str]:
+        """The registered names, sorted."""
+        return sorted(self._load())
+
+    def describe(self) -> list[tuple[str, str]]:
+        """``(name, description)`` of every entry, sorted by name."""
+        return [(name, self[name].description) for name in self.names()]
+
+    def make_params(self, method: str | Entry, params: Any = None, **overrides: Any) -> Any:
+        """A method's parameters: ``params`` (default: the method's defaults) with the
+        flat ``overrides``, each routed to the parameter object that owns it
+        (:func:`varflow.parameters.replace`), checked against the method.
+
+        Raises
+        ------
+        ValueError
+            An unknown method, parameters of the wrong kind, or an unknown or invalid
+            field (named in the message).
+        """
+        m = self.entry(method)
+        base = m.defaults() if params is None else params
+        m.check_params(base)
+        if not overrides:
+            return base
+        try:
+            out = base.replace(**overrides) if hasattr(base, "replace") else \
+                dataclasses.replace(base, **overrides)
+        except UnknownParameter as exc:
+            valid = sorted(name for name, _, _ in flat_fields(base))
+            raise ValueError(f"{exc.name}: not a parameter of {self.kind} {m.name!r} "
+                             f"(valid: {', '.join(valid)})") from None
+        except TypeError as exc:  # dataclasses.replace of a class without routing
+            raise ValueError(f"params: {exc}") from None
+        m.check_params(out)
+        return out
+
+    def fields(self, method: str | Entry, flow_method: str | None = None
+               ) -> list[tuple[str, Any, type]]:
+        """``(name, default, class documenting it)`` of every flat parameter a method
+        accepts, in the order :meth:`make_params` resolves them: the method's own
+        fields, then those of the objects composed into it (for a method built on a
+        two-frame method: the fields of ``flow_method``'s parameters, default the
+        method's own choice).  The CLI builds its flags and help from it."""
+        m = self.entry(method)
+        defaults = m.defaults()
+        if flow_method is not None and flow_method != getattr(defaults, "flow_method",
+                                                              flow_method):
+            defaults = self.make_params(m, flow_method=flow_method)
+        return [(name, value, type(owner)) for name, value, owner in flat_fields(defaults)]
+
+
+#: The two-frame flow methods (:func:`varflow.flow`).
+FLOW = Registry("method", Method, "varflow.twoframe.methods")
+#: The trajectory methods (:func:`varflow.track`).
+TRACK = Registry("trajectory method", Tracker, "varflow.multiframe.methods")
+#: The frame-interpolation methods (:func:`varflow.interpolate`).
+INTERPOLATE = Registry("interpolation method", Interpolator, "varflow.retime.methods")
+
+METHODS = FLOW
+TRACKERS = TRACK
+
+
+def get_method(name: str) -> Method:
+    """``FLOW.entry(name)``: a two-frame method by name (``ValueError`` if unknown)."""
+    return FLOW.entry(name)
 
 
 def get_tracker(name: str) -> Tracker:
-    """Look a trajectory method up by name; unknown names raise ``ValueError``."""
-    try:
-        return TRACKERS[name]
-    except KeyError:
-        raise ValueError(
-            f"method: unknown trajectory method {name!r}; available: {', '.join(TRACKERS)}"
-        ) from None
+    """``TRACK.entry(name)``: a trajectory method by name (``ValueError`` if unknown)."""
+    return TRACK.entry(name)
 
 
-def make_params(method: str | Method, params: Any = None, **overrides: Any) -> CoarseToFineParams:
-    """Build a method's parameter object from defaults, an existing object and overrides.
-
-    Raises
-    ------
-    ValueError
-        For an unknown field name (named in the message) or an invalid value.
-    """
-    m = get_method(method) if isinstance(method, str) else method
-    return _make(m, params, **overrides)
+def make_params(method: str | Method, params: Any = None, **overrides: Any) -> Any:
+    """``FLOW.make_params``: a two-frame method's parameters (:meth:`Registry.make_params`)."""
+    return FLOW.make_params(method, params, **overrides)
 
 
 def make_track_params(method: str | Tracker, params: Any = None, **overrides: Any) -> Any:
-    """:func:`make_params` for a trajectory method of :data:`TRACKERS`.
-
-    For a tracker that composes a two-frame method (a ``flow_params`` field), an
-    override that is not one of the tracker's own fields goes to ``flow_params``
-    (checked against the fields of ``flow_method``'s parameters, after a change of
-    ``flow_method``, which starts from that method's defaults unless
-    ``flow_params`` is given too).
-    """
-    m = get_tracker(method) if isinstance(method, str) else method
-    if "flow_params" not in {f.name for f in dataclasses.fields(m.params)}:
-        return _make(m, params, **overrides)
-    base = params if params is not None else m.params()
-    if not isinstance(base, m.params):
-        raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
-    return base.replace(**overrides) if overrides else base
+    """``TRACK.make_params``: a trajectory method's parameters
+    (:meth:`Registry.make_params`)."""
+    return TRACK.make_params(method, params, **overrides)
 
 
-def parameter_fields(entry: Method | Tracker, flow_method: str | None = None
+def parameter_fields(entry: Entry, flow_method: str | None = None
                      ) -> list[tuple[str, Any, type]]:
-    """``(name, default, class documenting it)`` of every parameter an entry accepts.
-
-    A method's fields; a tracker's own fields and, for a tracker composing a
-    two-frame method, then the fields of ``flow_method``'s parameters (default: the
-    tracker's default method), which :func:`make_track_params` routes to
-    ``flow_params``.  The CLI builds its flags and help from it.
-    """
-    defaults = entry.params()
-    out = [(f.name, getattr(defaults, f.name), entry.params)
-           for f in dataclasses.fields(entry.params) if f.name != "flow_params"]
-    inner = getattr(defaults, "flow_params", None)
-    if inner is not None and dataclasses.is_dataclass(inner):
-        if flow_method is not None and flow_method != defaults.flow_method:
-            if flow_method not in METHODS:
-                raise ValueError(f"flow_method: unknown two-frame method {flow_method!r}; "
-                                 f"available: {', '.join(sorted(METHODS))}")
-            inner = entry.params.default_flow_params(flow_method)
-        own = {name for name, _, _ in out}
-        out += [(f.name, getattr(inner, f.name), type(inner))
-                for f in dataclasses.fields(inner) if f.name not in own]
-    return out
-
-
-def _make(m: Method | Tracker, params: Any, **overrides: Any) -> Any:
-    base = params if params is not None else m.params()
-    if not isinstance(base, m.params):
-        raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
-    names = {f.name for f in dataclasses.fields(m.params)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ValueError(
-            f"{unknown[0]}: not a parameter of method {m.name!r} "
-            f"(valid: {', '.join(sorted(names))})"
-        )
-    return dataclasses.replace(base, **overrides) if overrides else base
+    """The flat parameters of any registered entry (:meth:`Registry.fields`)."""
+    for registry in (FLOW, TRACK, INTERPOLATE):
+        if isinstance(entry, registry.entry_type):
+            return registry.fields(entry, flow_method)
+    raise ValueError(f"method: not a registered entry: {entry!r}")

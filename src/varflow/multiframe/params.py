@@ -12,12 +12,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .._validate import check_field as _check
-from ..twoframe.coarse_to_fine import CoarseToFineParams
-from ..twoframe.methods import DEFAULT_METHOD, METHODS
-from ..twoframe.tvl1 import TVL1Params
+from ..parameters import Routed
+from ..registry import DEFAULT_METHOD, FLOW
+from ..twoframe.methods import resolve_flow_params
+from ..twoframe.params import PRESETS, TVL1Params
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .propagate import DEFAULT_REPAIR_COST, REPAIR_COSTS
-from .track import FlowTrackParams
 from .visibility import VisibilityParams
 
 __all__ = ["TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams", "RLRParams"]
@@ -39,17 +39,15 @@ FINAL_REPAIR_DISTANCES = (4,)
 #: illumination 2.05 / 2.90, noise 0.48 / 0.53).  Without the gate its link drags a small
 #: fast object off its track (the fast-object clip of the tests: far frames 5.2-6.7 px
 #: over L-step seeds, 0.12 px decoupled).
-TVL1_ENERGY = TVL1Params(max_iterations=50, n_warps=5, weighted_median_levels=0,
-                         sharpness_match=False)
+TVL1_ENERGY = PRESETS["multiframe"]
 
 
 @dataclass(frozen=True)
-class MultiFrameParams(FlowTrackParams):
+class MultiFrameParams(Routed):
     """Fields shared by the multi-frame methods (RLR, MFSF), and their two-frame energy.
 
-    Composed, not inherited (issue 27): ``flow_method`` and ``flow_params`` (of
-    :class:`~varflow.multiframe.track.FlowTrackParams`) are the two-frame method
-    whose energy the trajectories minimise, frame by frame, and whose flows
+    The two-frame energy is composed: ``flow_method`` and ``flow_params`` are the
+    two-frame method whose energy the trajectories minimise, frame by frame, and whose flows
     initialise them.  Its fields serve the initial flows and the multi-frame
     refinement alike: the pyramid (``scale_factor``, ``min_size``, ``n_warps``…),
     the pre-processing, the median filters, the data term (λ_D = ``data_weight``,
@@ -58,15 +56,21 @@ class MultiFrameParams(FlowTrackParams):
     (``edge_weight``, ``edge_weight_min``), and θ (``coupling``) of the relaxed
     data term (``relaxed_data``); ``max_iterations`` and ``tolerance``
     serve the two-frame flows (the U-step has ``ustep_iterations`` and
-    ``ustep_tolerance``).  :func:`varflow.registry.make_track_params` (and so
-    :func:`varflow.track` and the CLI) routes a field of the energy to
-    ``flow_params``.  The method must be TV-L1's (``tvl1``, ``tvl1-fast``,
-    ``tvl1-ld``: the U-step has its data term and isotropic TV); its
-    ``sharpness_match`` matches two frames and must be off.  A method named without
-    ``flow_params`` takes :meth:`default_flow_params`.
+    ``ustep_tolerance``).  A flat field of the energy goes to ``flow_params``
+    (:func:`varflow.parameters.replace`, and so :func:`varflow.track` and the
+    CLI).  The method must be TV-L1's (``tvl1``, ``tvl1-fast``, ``tvl1-ld``: the
+    U-step has its data term and isotropic TV); its ``sharpness_match`` matches two
+    frames and must be off.  A method named without ``flow_params`` takes
+    :meth:`default_flow_params`.
 
     Attributes
     ----------
+    flow_method : str
+        The two-frame method of the initial flows and of the energy: ``tvl1``,
+        ``tvl1-fast`` or ``tvl1-ld`` (the U-step has TV-L1's data term and isotropic
+        TV).  Default ``"tvl1"``.
+    flow_params : TVL1Params or None
+        Its parameters; None (default) gives :meth:`default_flow_params`.
     tv_weight : float
         λ_TV, weight of the edge-weighted TV of every frame's displacement
         (relative to λ_D = ``data_weight`` as in TV-L1).  Default 1.
@@ -191,6 +195,8 @@ class MultiFrameParams(FlowTrackParams):
         the noisy synthetic clips the same within 1 %).
     """
 
+    flow_method: str = DEFAULT_METHOD
+    flow_params: TVL1Params | None = None
     tv_weight: float = 1.0
     primal_step: float = 0.25
     ustep_iterations: int = 50
@@ -213,21 +219,24 @@ class MultiFrameParams(FlowTrackParams):
     hidden_data_weight: float = 0.0
     relaxed_data: bool = True
 
+    _COMPOSED = ("flow_params",)
+    _DEPENDENT = {"flow_method": "flow_params"}
+
     @classmethod
-    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
+    def default_flow_params(cls, flow_method: str) -> TVL1Params:
         """The energy of a ``flow_method`` named without ``flow_params``:
         :data:`TVL1_ENERGY` for ``tvl1`` (its data term and regulariser), another
         method's defaults with the sharpness match off (it matches two frames)."""
         if flow_method == DEFAULT_METHOD:
             return TVL1_ENERGY
-        defaults = super().default_flow_params(flow_method)
-        if getattr(defaults, "sharpness_match", False):
+        defaults = FLOW[flow_method].defaults()
+        if defaults.sharpness_match:
             defaults = replace(defaults, sharpness_match=False)
         return defaults
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        _check(METHODS[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
+        resolve_flow_params(self, type(self).default_flow_params)
+        _check(FLOW[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
                f"the multi-frame U-step has TV-L1's energy (isotropic TV); "
                f"{self.flow_method!r} is not a TV-L1 method")
         _check(not self.flow_params.sharpness_match, "sharpness_match",

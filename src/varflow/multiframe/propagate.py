@@ -75,8 +75,8 @@ from ..twoframe.coarse_to_fine import (
     prepare_pyramid,
     working_channels,
 )
-from ..twoframe.large_displacement import LargeDisplacementParams
 from ..twoframe.methods import METHODS, run_method
+from ..twoframe.params import PRESETS
 from ..twoframe.tvl1 import TVL1Params, solve_warp
 from .track import TrackCallback
 
@@ -132,7 +132,7 @@ def propagate_trajectories(
     levels: int = 3,
     direct: bool = False,
     matching: bool = False,
-    matching_params: LargeDisplacementParams | None = None,
+    matching_params: TVL1Params | None = None,
     cost: str = "census",
     repair_distances: tuple[int, ...] = (2, 4, 8),
     repair_adjacent: bool = True,
@@ -160,7 +160,7 @@ def propagate_trajectories(
         False keeps the propagated candidates alone.
     matching : bool
         Add the matching-guided candidate of every frame (see the module notes).
-    matching_params : LargeDisplacementParams, optional
+    matching_params : TVL1Params, optional
         Of that candidate; default ``tvl1-ld``'s defaults (what ``varflow.flow``
         runs).
     cost : {"census", "colour"}
@@ -214,7 +214,7 @@ def propagate_trajectories(
     repaired: list[float] = []
     ld_params = None
     if matching:
-        ld_params = LargeDisplacementParams() if matching_params is None else matching_params
+        ld_params = PRESETS["tvl1-ld"] if matching_params is None else matching_params
     planes = census_planes(frames[ref]) if cost == "census" else frames[ref]
     for i, n in enumerate(todo):
         s = 1 if n > ref else -1

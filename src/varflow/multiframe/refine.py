@@ -26,7 +26,6 @@ from ..ops.prox import project_l2_ball
 from ..ops.pyramid import pyramid_shapes, resize_bilinear, resize_flow, smooth_image
 from ..ops.warp import warp_bicubic
 from ..twoframe.coarse_to_fine import (
-    LevelState,
     coarse_to_fine_pyramids,
     guide_pyramid,
     noise_adapted,
@@ -35,6 +34,7 @@ from ..twoframe.coarse_to_fine import (
 )
 from ..twoframe.tvl1 import (
     TVL1Params,
+    TVL1State,
     data_channels,
     edge_weight,
     gradient_channel_count,
@@ -205,7 +205,7 @@ def initial_trajectories(frames: np.ndarray, ref: int, params: MultiFrameParams,
 
 def _linearised_frame(i0: np.ndarray, i1: np.ndarray, about: np.ndarray,
                       visible: np.ndarray | None, hidden_data_weight: float,
-                      link_ratio: Any, energy: TVL1Params, level_state: LevelState) -> tuple:
+                      link_ratio: Any, energy: TVL1Params, level_state: TVL1State) -> tuple:
     """One frame's data term linearised about ``about`` (and its link channels).
 
     The channels of the two-frame energy, built by TV-L1's own
@@ -279,7 +279,7 @@ class MultiFrameLevel:
         Row blocks of the kernels (:func:`varflow.ops.primal_dual.row_blocks`).
     ubar : ndarray, shape (2, h, w), float32
         Scratch of the U-step kernel.
-    data : LevelState
+    data : TVL1State
         TV-L1's data-term cache of the level (the reference's smoothed gradients),
         shared by the frames.
     q : ndarray, shape (F, K, h, w), float32, or None
@@ -298,7 +298,7 @@ class MultiFrameLevel:
     hidden_link_adjacent: np.float32
     blocks: np.ndarray
     ubar: np.ndarray
-    data: LevelState
+    data: TVL1State
     q: np.ndarray | None = None
 
 
@@ -343,7 +343,7 @@ class _UStep:
             hidden_link=np.float32(self.w_hidden / lam),
             hidden_link_adjacent=np.float32(self.a_adj * self.w_hidden / lam),
             blocks=row_blocks(h), ubar=np.empty((2, h, w), np.float32),
-            data=LevelState(level=level))
+            data=TVL1State(level=level))
 
     def warp(self, st: MultiFrameLevel, traj: np.ndarray, k: int) -> np.ndarray:
         params, energy, coupling, l1 = self.params, self.energy, self.coupling, self.l1

@@ -22,11 +22,10 @@ table is the flow a user already has.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -34,8 +33,10 @@ import numpy as np
 from .._validate import as_float_frames
 from .._validate import check_field as _check
 from ..ops.warp import warp_bicubic
-from ..twoframe.coarse_to_fine import CoarseToFineParams
-from ..twoframe.methods import DEFAULT_METHOD, METHODS, run_method
+from ..parameters import Routed
+from ..registry import DEFAULT_METHOD, FLOW
+from ..twoframe.methods import resolve_flow_params, run_method
+from ..twoframe.params import TVL1Params
 
 __all__ = [
     "TrackCallback",
@@ -56,82 +57,49 @@ TrackCallback = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
-class FlowTrackParams:
-    """A registered two-frame method and its parameters: the trackers built on flows.
+class FlowTrackParams(Routed):
+    """Parameters of the trackers built on two-frame flows (``twoframe``, ``chain``).
 
-    Composed, not inherited: the two-frame method's parameter object is a field, so
-    any method of :data:`~varflow.twoframe.methods.METHODS` serves, each with all
-    its own fields.  :func:`varflow.registry.make_track_params` (and so
-    :func:`varflow.track` and the CLI) routes an override that is not a field
-    here to ``flow_params``.
+    The two-frame method and its parameter object are fields, so any method of
+    :data:`~varflow.registry.FLOW` serves, each with all its own fields; a flat
+    override that is not a field here goes to ``flow_params``
+    (:func:`varflow.parameters.replace`), and a new ``flow_method`` without
+    ``flow_params`` starts from that method's defaults.
 
     Attributes
     ----------
     flow_method : str
-        The two-frame method, a name of :data:`~varflow.twoframe.methods.METHODS`.
+        The two-frame method, a name of :data:`~varflow.registry.FLOW`.
         Default ``"tvl1"``, the default of :func:`varflow.flow`.
-    flow_params : CoarseToFineParams or None
-        Its parameter object, an instance of the method's parameter class; None
-        (default) gives :meth:`default_flow_params`, the method's defaults.
+    flow_params : TVL1Params or None
+        Its parameters (with the method's terms); None (default) gives
+        :meth:`default_flow_params`, the method's defaults.
     """
 
     flow_method: str = DEFAULT_METHOD
-    flow_params: CoarseToFineParams | None = None
+    flow_params: TVL1Params | None = None
+
+    _COMPOSED = ("flow_params",)
+    _DEPENDENT = {"flow_method": "flow_params"}
 
     @classmethod
-    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
-        """The ``flow_params`` of a registered ``flow_method`` named without them: the
-        method's defaults (a tracker class may choose others)."""
-        return METHODS[flow_method].params()
+    def default_flow_params(cls, flow_method: str) -> TVL1Params:
+        """The ``flow_params`` of a ``flow_method`` named without them: its defaults."""
+        return FLOW[flow_method].defaults()
 
     def __post_init__(self) -> None:
-        method = METHODS.get(self.flow_method) if isinstance(self.flow_method, str) else None
-        _check(method is not None, "flow_method",
-               f"unknown two-frame method {self.flow_method!r}; available: "
-               f"{', '.join(sorted(METHODS))}")
-        if self.flow_params is None:
-            object.__setattr__(self, "flow_params", type(self).default_flow_params(
-                self.flow_method))
-        _check(isinstance(self.flow_params, method.params), "flow_params",
-               f"expected {method.params.__name__} for method {self.flow_method!r}, got "
-               f"{type(self.flow_params).__name__}")
-
-    def replace(self, **changes: Any) -> FlowTrackParams:
-        """A copy with ``changes``: the tracker's own fields, and the fields of the
-        two-frame parameters, which go to ``flow_params`` (a new ``flow_method``
-        without ``flow_params`` starts from that method's defaults)."""
-        own = {f.name for f in fields(self)}
-        mine = {k: v for k, v in changes.items() if k in own}
-        rest = {k: v for k, v in changes.items() if k not in own}
-        if "flow_method" in mine and "flow_params" not in mine and \
-                mine["flow_method"] != self.flow_method:
-            mine["flow_params"] = None
-        out = dataclasses.replace(self, **mine) if mine else self
-        if rest:
-            bad = sorted(set(rest) - {f.name for f in fields(out.flow_params)})
-            _check(not bad, bad[0] if bad else "", f"not a parameter of {type(self).__name__} "
-                   f"or of the {out.flow_method!r} parameters")
-            out = dataclasses.replace(out, flow_params=dataclasses.replace(out.flow_params,
-                                                                           **rest))
-        return out
+        resolve_flow_params(self, type(self).default_flow_params)
 
 
-@dataclass(frozen=True)
-class TwoFrameTrackParams(FlowTrackParams):
-    """Parameters of the ``twoframe`` tracker: the two-frame flow from the reference to
-    every frame.  The fields are those of :class:`FlowTrackParams`."""
-
-
-@dataclass(frozen=True)
-class ChainTrackParams(FlowTrackParams):
-    """Parameters of the ``chain`` tracker: two-frame flows between consecutive frames,
-    composed.  The fields are those of :class:`FlowTrackParams`."""
+#: The former names of :class:`FlowTrackParams` for each tracker.
+TwoFrameTrackParams = FlowTrackParams
+ChainTrackParams = FlowTrackParams
 
 
 def _flow(params: FlowTrackParams, frame0: np.ndarray, frame1: np.ndarray) -> np.ndarray:
     """The flow of ``params.flow_method`` from ``frame0`` to ``frame1``, as
     :func:`varflow.flow` computes it."""
-    return run_method(METHODS[params.flow_method], frame0, frame1, params.flow_params)
+    return run_method(FLOW[params.flow_method], frame0, frame1, params.flow_params)
 
 
 def check_frames(frames: Any) -> np.ndarray:

@@ -1,7 +1,9 @@
-"""The registry of frame-interpolation methods and :func:`interpolate`.
+"""The frame-interpolation methods, registered in :data:`varflow.registry.INTERPOLATE`,
+and :func:`interpolate`.
 
-:data:`INTERPOLATORS` maps a method name to an :class:`Interpolator`: its frozen
-parameter dataclass, its ``prepare`` function and a one-line description.
+Each :class:`~varflow.registry.Interpolator` names its parameter defaults, its
+``prepare`` function, a one-line description and how many neighbouring frames it
+can use.
 ``prepare`` estimates the motion of a pair once and returns a :class:`PairMotion`;
 its ``render(t)`` synthesises the frame at any time ``t`` in ``(0, 1)`` from it.
 :func:`interpolate` (re-exported as :func:`varflow.interpolate`) runs one.
@@ -14,18 +16,20 @@ exactly.
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._validate import check_field
-from ..multiframe.track import FlowTrackParams
+from ..parameters import Routed
+from ..registry import DEFAULT_METHOD, FLOW, INTERPOLATE, Interpolator
 from ..twoframe.coarse_to_fine import ProgressCallback
+from ..twoframe.methods import resolve_flow_params
+from ..twoframe.params import TVL1Params
 from .motion import FlowCache, PairMotion, bidirectional_flows
-from .splatting import SplatFastParams, SplatParams, prepare_splat
+from .splatting import SplatParams, prepare_splat, splat_fast_defaults
 
 __all__ = [
     "DEFAULT_INTERPOLATOR",
@@ -40,40 +44,11 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class Interpolator:
-    """A registered frame-interpolation method.
-
-    Attributes
-    ----------
-    name : str
-    params : type
-        Frozen dataclass of its parameters.
-    prepare : callable
-        ``prepare(frame0, frame1, params, previous=None, following=None,
-        callback=None, stats=None, cache=None) -> PairMotion``; frames (H, W, C)
-        float32 as :class:`PairMotion` holds them; ``previous`` / ``following``
-        the frames before ``frame0`` and after ``frame1`` when the caller has them
-        (methods with :attr:`context` 1 use them, the others ignore them);
-        ``cache`` a :class:`~varflow.retime.motion.FlowCache` through which the
-        flows are estimated.
-    description : str
-    context : int
-        Frames each side of the pair the method can use (0 or 1).
-    """
-
-    name: str
-    params: type
-    prepare: Callable[..., PairMotion]
-    description: str
-    context: int = 0
-
-
 # --------------------------------------------------------------------------- naive
 
 
 @dataclass(frozen=True)
-class NaiveParams(FlowTrackParams):
+class NaiveParams(Routed):
     """Parameters of ``naive``: the simple way to interpolate with varflow's flow.
 
     The default :func:`varflow.flow` both ways, the flows at time t approximated
@@ -86,9 +61,23 @@ class NaiveParams(FlowTrackParams):
     ----------
     flow_method : str
         The two-frame method (default that of :func:`varflow.flow`).
-    flow_params : CoarseToFineParams or None
+    flow_params : TVL1Params or None
         Its parameters (None: its defaults).
     """
+
+    flow_method: str = DEFAULT_METHOD
+    flow_params: TVL1Params | None = None
+
+    _COMPOSED = ("flow_params",)
+    _DEPENDENT = {"flow_method": "flow_params"}
+
+    @classmethod
+    def default_flow_params(cls, flow_method: str) -> TVL1Params:
+        """The ``flow_params`` of a ``flow_method`` named without them: its defaults."""
+        return FLOW[flow_method].defaults()
+
+    def __post_init__(self) -> None:
+        resolve_flow_params(self, type(self).default_flow_params)
 
 
 class _NaiveMotion(PairMotion):
@@ -119,74 +108,53 @@ def _prepare_naive(frame0: np.ndarray, frame1: np.ndarray, params: NaiveParams,
 
 # --------------------------------------------------------------------------- registry
 
-INTERPOLATORS: dict[str, Interpolator] = {
-    "naive": Interpolator(
-        name="naive",
-        params=NaiveParams,
-        prepare=_prepare_naive,
-        description="varflow.flow both ways, linear flows at time t, backward warps "
-        "blended by time (the simple baseline)",
-    ),
-    "splat": Interpolator(
-        name="splat",
-        params=SplatParams,
-        prepare=prepare_splat,
-        description="flows both ways, splatted to time t (softmax z-buffer, holes filled "
-        "outside in), occlusion-aware bicubic blend (Baker et al. 2011); quadratic "
-        "trajectories from the neighbouring frames when given (Xu et al. 2019)",
-        context=1,
-    ),
-    "splat-fast": Interpolator(
-        name="splat-fast",
-        params=SplatFastParams,
-        prepare=prepare_splat,
-        description="splat on tvl1-fast flows of frames reduced to at most 150 000 pixels "
-        "(within 3x of minterpolate's time)",
-        context=1,
-    ),
-}
+INTERPOLATORS = INTERPOLATE
+
+# Memory: estimated as the flows' method on the pair (varflow._memory); kernels: the
+# flows' and the splatting's.
+INTERPOLATE.register(Interpolator(
+    name="naive",
+    description="varflow.flow both ways, linear flows at time t, backward warps blended by "
+    "time (the simple baseline)",
+    defaults=NaiveParams,
+    kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    prepare=_prepare_naive,
+))
+INTERPOLATE.register(Interpolator(
+    name="splat",
+    description="flows both ways, splatted to time t (softmax z-buffer, holes filled "
+    "outside in), occlusion-aware bicubic blend (Baker et al. 2011); quadratic "
+    "trajectories from the neighbouring frames when given (Xu et al. 2019)",
+    defaults=SplatParams,
+    kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    prepare=prepare_splat,
+    context=1,
+))
+INTERPOLATE.register(Interpolator(
+    name="splat-fast",
+    description="splat on tvl1-fast flows of frames reduced to at most 150 000 pixels "
+    "(within 3x of minterpolate's time)",
+    defaults=splat_fast_defaults,
+    kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    prepare=prepare_splat,
+    context=1,
+))
 
 #: The method of :func:`interpolate` when none is named.
 DEFAULT_INTERPOLATOR = "splat"
 
 
 def get_interpolator(name: str) -> Interpolator:
-    """Look an interpolation method up by name; unknown names raise ``ValueError``."""
-    try:
-        return INTERPOLATORS[name]
-    except (KeyError, TypeError):
-        raise ValueError(
-            f"method: unknown interpolation method {name!r}; available: "
-            f"{', '.join(INTERPOLATORS)}"
-        ) from None
+    """``INTERPOLATE.entry(name)``: an interpolation method by name (``ValueError`` if
+    unknown)."""
+    return INTERPOLATE.entry(name)
 
 
 def make_interp_params(method: str | Interpolator, params: Any = None,
                        **overrides: Any) -> Any:
-    """A method's parameter object from defaults, an existing object and overrides.
-
-    For a method composing a two-frame method (a ``flow_params`` field), an override
-    that is not one of its own fields goes to ``flow_params``.
-
-    Raises
-    ------
-    ValueError
-        For an unknown field (named in the message) or an invalid value.
-    """
-    m = get_interpolator(method) if isinstance(method, str) else method
-    base = params if params is not None else m.params()
-    if not isinstance(base, m.params):
-        raise ValueError(f"params: expected {m.params.__name__}, got {type(base).__name__}")
-    if not overrides:
-        return base
-    if hasattr(base, "replace"):
-        return base.replace(**overrides)
-    names = {f.name for f in dataclasses.fields(m.params)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ValueError(f"{unknown[0]}: not a parameter of interpolation method {m.name!r} "
-                         f"(valid: {', '.join(sorted(names))})")
-    return dataclasses.replace(base, **overrides)
+    """``INTERPOLATE.make_params``: an interpolation method's parameters
+    (:meth:`varflow.registry.Registry.make_params`)."""
+    return INTERPOLATE.make_params(method, params, **overrides)
 
 
 def check_times(t: Any) -> tuple[list[float], bool]:

@@ -17,8 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..multiframe.track import FlowTrackParams
 from ..twoframe.coarse_to_fine import ProgressCallback
+from ..twoframe.methods import FlowChoice
 
 __all__ = ["FlowCache", "PairMotion", "bidirectional_flows", "pair_flows", "reduced",
            "working_scale"]
@@ -85,7 +85,7 @@ class FlowCache:
         return len(self._flows)
 
     @staticmethod
-    def key(frame_a: np.ndarray, frame_b: np.ndarray, params: FlowTrackParams,
+    def key(frame_a: np.ndarray, frame_b: np.ndarray, params: FlowChoice,
             max_pixels: int = 0, digests: dict[int, bytes] | None = None) -> tuple:
         """The cache key of the flow from ``frame_a`` to ``frame_b``.
 
@@ -134,7 +134,7 @@ def reduced(frame: np.ndarray, scale: float) -> np.ndarray:
     return resize_bilinear(smooth_image_fast(frame, 0.6 / scale - 0.6), shape)
 
 
-def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrackParams,
+def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowChoice,
                callback: ProgressCallback | None = None, stats: dict | None = None,
                cache: FlowCache | None = None, max_pixels: int = 0) -> list[np.ndarray]:
     """The flows of ``params.flow_method`` from ``a`` to ``b`` for every pair ``(a, b)``.
@@ -143,7 +143,7 @@ def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrack
     ----------
     pairs : sequence of (ndarray, ndarray)
         Frames (H, W, C) float32, as :func:`varflow.flow` takes them.
-    params : FlowTrackParams
+    params : FlowChoice
         The two-frame method and its parameters.
     callback : callable, optional
         ``callback(done, total)``: one progress range over all the flows to
@@ -163,9 +163,10 @@ def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrack
         The cache's own arrays for cached flows: do not modify them.
     """
     from ..ops.pyramid import resize_flow
-    from ..twoframe.methods import METHODS, run_method
+    from ..registry import FLOW
+    from ..twoframe.methods import run_method
 
-    m = METHODS[params.flow_method]
+    m = FLOW[params.flow_method]
     digests: dict[int, bytes] = {}  # the frames are alive for the whole call
     keys = [None if cache is None else FlowCache.key(a, b, params, max_pixels, digests)
             for a, b in pairs]
@@ -200,7 +201,7 @@ def pair_flows(pairs: Sequence[tuple[np.ndarray, np.ndarray]], params: FlowTrack
     return out  # type: ignore[return-value]
 
 
-def bidirectional_flows(frame0: np.ndarray, frame1: np.ndarray, params: FlowTrackParams,
+def bidirectional_flows(frame0: np.ndarray, frame1: np.ndarray, params: FlowChoice,
                         callback: ProgressCallback | None = None, stats: dict | None = None,
                         cache: FlowCache | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The flows 0→1 and 1→0 of ``params.flow_method`` (:func:`pair_flows`).

@@ -23,8 +23,8 @@ bidirectional, with softmax splatting (Niklaus & Liu 2020) as its z-buffer:
    filled outside in (:func:`varflow.ops.splat.fill_holes`).  With the frames
    before and after the pair, the motion is quadratic (Xu et al. 2019):
    ``d0 = t F01 + a0 (t² − t) / 2`` with the acceleration ``a0 = F01 + F0,−1``,
-   likewise for frame 1 (:func:`accelerations`); +2.2 dB on the Sintel tuning
-   split, whose motion accelerates.
+   likewise for frame 1 (:func:`accelerations`): it pays where the motion
+   accelerates (Sintel; benchmarks/HISTORY.md).
 4. **The frame**: with ``v0``, ``v1`` the splatted vectors of step 3 (for linear
    motion ``−t u_t`` and ``(1 − t) u_t``, ``u_t`` the motion at time t),
    ``x0 = p + v0(p)`` and ``x1 = p + v1(p)``;
@@ -38,8 +38,8 @@ bidirectional, with softmax splatting (Niklaus & Liu 2020) as its z-buffer:
    in the other frame (``O0(x0) O1(x1)``, smoothed), the flows failed (fast
    non-rigid motion, motion blur) and the two samples show different things; the
    frame is softened there by a Gaussian of σ = :attr:`SplatParams.fallback_blur`
-   rather than showing two sharp, misplaced copies (0.1-0.2 dB on every set of
-   the tuning split).
+   rather than showing two sharp, misplaced copies (a gain on every set;
+   benchmarks/HISTORY.md).
 
 The motion (steps 1-2, and the accelerations) is estimated once per pair; steps 3-5
 run for every ``t``.
@@ -57,21 +57,25 @@ displacement optical flow", ECCV 2010 (the forward-backward check).
 
 from __future__ import annotations
 
-import dataclasses
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._validate import check_field
-from ..multiframe.track import FlowTrackParams
 from ..ops.occlusion import hidden_mask, photometric_error
 from ..ops.pyramid import smooth_image_fast
 from ..ops.splat import fill_holes, splat_trajectories
 from ..ops.warp import warp_bicubic, warp_bilinear
-from ..twoframe.coarse_to_fine import CoarseToFineParams, ProgressCallback
+from ..parameters import Routed
+from ..registry import FLOW
+from ..twoframe.coarse_to_fine import ProgressCallback
+from ..twoframe.methods import resolve_flow_params
+from ..twoframe.params import TVL1Params
 from .motion import FlowCache, PairMotion, pair_flows
 
 __all__ = ["SAMPLINGS", "SplatFastParams", "SplatMotion", "SplatParams", "accelerations",
+           "splat_fast_defaults",
            "prepare_splat"]
 
 #: Values of :attr:`SplatParams.sampling`.
@@ -79,7 +83,7 @@ SAMPLINGS = ("bicubic", "bilinear")
 
 
 @dataclass(frozen=True)
-class SplatParams(FlowTrackParams):
+class SplatParams(Routed):
     """Parameters of ``splat`` (see :mod:`varflow.retime.splatting`).
 
     Attributes
@@ -87,19 +91,18 @@ class SplatParams(FlowTrackParams):
     flow_method : str
         The two-frame method of ``F01`` and ``F10`` (default ``"tvl1-ld"``:
         interpolated footage is often fast).
-    flow_params : CoarseToFineParams or None
+    flow_params : TVL1Params or None
         Its parameters; None gives :meth:`default_flow_params`: the method's
         defaults, for ``tvl1-ld`` with the matching on frames of half the size
-        (``match_scale`` 0.5: 0.2 dB on the Middlebury tuning split, none on the
-        others, for 0.7 the time at 960 × 540), the weighted median on the finest
-        3 levels and 24 iterations per warp (as ``tvl1``; on the tuning split the
-        same PSNR or 0.1 dB more, for 0.85 the time).
+        (``match_scale`` 0.5), the weighted median on the finest 3 levels and 24
+        iterations per warp (as ``tvl1``): about 0.6 of the time for at most a
+        fifth of a dB (benchmarks/HISTORY.md).
     flow_max_pixels : int
         Frames of more pixels than this are resized to this many for the flows
         (anti-aliased; the flows are resized back), which bounds their cost on
         large frames; the frames themselves are rendered at full size.  0: never.
-        Default 300 000 (960 × 540 frames are reduced to 0.76 of their size: on
-        the Sintel tuning split, 0.82 of theirs, no loss).
+        Default 300 000: 960 × 540 frames are reduced to 0.76 of their size, at
+        no measured loss.
     splat_sharpness : float
         α of the splatting importance ``exp(−α Z)``, 1/intensity units (frames in
         [0, 1]); 0 averages whatever lands on a pixel, large values keep the
@@ -130,6 +133,7 @@ class SplatParams(FlowTrackParams):
     """
 
     flow_method: str = "tvl1-ld"
+    flow_params: TVL1Params | None = None
     flow_max_pixels: int = 300_000
     splat_sharpness: float = 50.0
     occlusion_cost: float = 1.0
@@ -140,18 +144,21 @@ class SplatParams(FlowTrackParams):
     fallback_blur: float = 2.0
     quadratic: bool = True
 
+    _COMPOSED = ("flow_params",)
+    _DEPENDENT = {"flow_method": "flow_params"}
+
     @classmethod
-    def default_flow_params(cls, flow_method: str) -> CoarseToFineParams:
+    def default_flow_params(cls, flow_method: str) -> TVL1Params:
         """The method's defaults; for ``tvl1-ld`` with ``match_scale`` 0.5,
         ``weighted_median_levels`` 3 and ``max_iterations`` 24."""
-        defaults = super().default_flow_params(flow_method)
+        defaults = FLOW[flow_method].defaults()
         if flow_method == "tvl1-ld":
-            return dataclasses.replace(defaults, match_scale=0.5, weighted_median_levels=3,
-                                       max_iterations=24)
+            return defaults.replace(match_scale=0.5, weighted_median_levels=3,
+                                    max_iterations=24)
         return defaults
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        resolve_flow_params(self, type(self).default_flow_params)
         for name in ("splat_sharpness", "occlusion_cost", "fb_tolerance", "fb_relative",
                      "fallback_blur"):
             v = getattr(self, name)
@@ -168,26 +175,19 @@ class SplatParams(FlowTrackParams):
                         f"expected a bool, got {getattr(self, name)!r}")
 
 
-@dataclass(frozen=True)
-class SplatFastParams(SplatParams):
-    """Parameters of ``splat-fast``: ``splat`` on the ``tvl1-fast`` preset's flows,
-    estimated on frames of at most 150 000 pixels.
+def splat_fast_defaults() -> SplatParams:
+    """The defaults of ``splat-fast``: ``splat`` on the ``tvl1-fast`` preset's flows,
+    estimated on frames of at most 150 000 pixels (``flow_max_pixels``): within 3× of
+    FFmpeg minterpolate's time per 960 × 540 frame (benchmarks/README.md)."""
+    return SplatParams(flow_method="tvl1-fast", flow_max_pixels=150_000)
 
-    Within 3× of FFmpeg minterpolate's time per 960 × 540 frame, and above its PSNR
-    on every set (benchmarks/README.md).  The fields are those of
-    :class:`SplatParams`; only two defaults differ.
 
-    Attributes
-    ----------
-    flow_method : str
-        The two-frame method of ``F01`` and ``F10``.  Default ``"tvl1-fast"``.
-    flow_max_pixels : int
-        Frames of more pixels than this are resized to this many for the flows.
-        Default 150 000.
-    """
-
-    flow_method: str = "tvl1-fast"
-    flow_max_pixels: int = 150_000
+def SplatFastParams(**fields: object) -> SplatParams:
+    """Deprecated: :func:`splat_fast_defaults` with ``fields`` (routed as
+    :meth:`SplatParams.replace` does)."""
+    warnings.warn("SplatFastParams is deprecated: use varflow.make_interp_params("
+                  "'splat-fast', ...)", DeprecationWarning, stacklevel=2)
+    return splat_fast_defaults().replace(**fields) if fields else splat_fast_defaults()
 
 
 class SplatMotion(PairMotion):

@@ -9,17 +9,17 @@ and the upsampling of the flow between levels.  A method plugs in a *warp solver
     solve_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state) -> flow
 
 that minimises its energy linearised around ``flow0`` at one pyramid level;
-``state`` is the :class:`LevelState` that lives for one level (dual variables,
-edge weights…); ``state.previous`` holds the state of the coarser level, so a
-solver can warm start its dual variables across levels, and ``state.warp`` is the
-index of the current warp at this level (``params.level_warps(shape)`` warps per
-level).
+``state`` is the :class:`LevelState` that lives for one level: the driver's
+``level``, ``warp`` (the index of the current warp, ``params.level_warps(shape)``
+warps per level) and ``previous`` (the coarser level's state), and ``data``, which
+the solver owns (its dual variables, edge weights…; ``state.previous.data`` warm
+starts them across levels).
 
 The level and warp loop itself is :func:`run_levels`: it carries a stack of flows
 through the levels (upsampling between them), calls a per-level set-up and a
 per-warp step, and filters every flow after each warp.  The two-frame driver runs it
-on one flow; the multi-frame refinement of :mod:`varflow.multiframe.rlr` (RLR and
-MFSF) on the ``F`` displacement fields of a clip, with its own warp step (the
+on one flow; the multi-frame refinement of :mod:`varflow.multiframe.refine` (RLR
+and MFSF) on the ``F`` displacement fields of a clip, with its own warp step (the
 coupled U-step) and typed level state.
 """
 
@@ -43,6 +43,11 @@ from ..ops.pyramid import build_pyramid, pyramid_shapes, resize_flow
 from ..ops.rof import structure_texture
 from ..ops.sharpness import match_sharpness
 from ..ops.warp import warp_bicubic
+from .params import TVL1Params
+
+#: The driver's parameters are those of the TV-L1 energy (its pyramid, warping,
+#: pre-processing and filter fields); the name is kept for code written against it.
+CoarseToFineParams = TVL1Params
 
 __all__ = [
     "CoarseToFineParams",
@@ -77,185 +82,13 @@ LevelHook = Callable[[int, np.ndarray, np.ndarray, np.ndarray, dict], np.ndarray
 _check = check_field  # the twoframe modules' short name
 
 
-@dataclass(frozen=True)
-class CoarseToFineParams:
-    """Pyramid, warping and pre-processing parameters shared by two-frame methods.
-
-    Attributes
-    ----------
-    scale_factor : float
-        η, ratio between the sizes of consecutive pyramid levels, in (0, 1).
-        Default 0.8.
-    max_levels : int
-        Maximum number of pyramid levels (the finest included).  Default 40; in
-        practice ``min_size`` decides.
-    min_size : int
-        Smallest allowed side of the coarsest level, pixels.  Default 16.
-    n_warps : int
-        Number of warps (re-linearisations) per level.  Default 5.
-    median_size : int
-        Side of the median filter applied to the flow after each warp (Sun, Roth
-        & Black 2010); 0 or 1 disables it.  Default 5.
-    weighted_median_radius : int
-        r of the weighted (non-local) median of Sun, Roth & Black (2010, 2014):
-        after the last warp of every level (``weighted_median_every_warp``: after
-        every warp), at the pixels near motion boundaries, each flow
-        component becomes the median of its (2r+1)² neighbours weighted by their
-        distance and their colour difference in the first frame
-        (:func:`varflow.ops.median.weighted_median_flow`); the plain median
-        (``median_size``) serves everywhere else.  Pixels; 0 disables it.
-        Default 0 (``tvl1`` sets 3).
-    weighted_median_sigma_space : float
-        σ_s of its spatial weight exp(-d²/(2σ_s²)), pixels.  Default 7.
-    weighted_median_sigma_colour : float
-        σ_c of its colour weight exp(-‖ΔI‖²/(2σ_c² C)), intensity units (frames in
-        [0, 1]; the guide is the first frame's working channels at the level's
-        size, before the sharpness match and the structure-texture step: the
-        grey mean with ``grey``, else the colour channels).  Default 0.05.
-    weighted_median_threshold : float
-        The flow edges where it applies: ``Σ_k |∂x f_k| + |∂y f_k|`` at least this
-        (pixels per pixel), grown by 2 pixels (:func:`varflow.ops.median.flow_edge_mask`);
-        0 applies it everywhere.  Default 0.5.
-    weighted_median_sigma_divergence : float
-        σ_d of the visibility factor of the weighted median's votes,
-        exp(-min(div f, 0)² / (2σ_d²)) (:func:`varflow.ops.median.flow_visibility`:
-        where the flow converges a surface is being covered, and its flow is
-        unreliable), pixels per pixel; 0 leaves it out.  Default 0.3 (Sun et al.).
-    weighted_median_noise : float
-        k of the noise rule of the colour weight: with σ̂ the noise of the frames
-        (:func:`varflow.ops.fusion.noise_sigma_flat` of the working channels, the
-        σ̂ of TV-L1's noise rule), the colour weight uses
-        σ_c' = sqrt(σ_c² + (k σ̂)²), so that on noisy frames the votes are not
-        weighted by the noise of the guide.  0 turns the rule off.  Default 5
-        (RLR on a noisy synthetic clip, σ̂ ≈ 0.039: mean EPE 0.114 at k = 0, 0.076
-        at 5, 0.080 without the weighted median; the tuning split, Middlebury and
-        the small Sintel pairs move by less than 0.002 for k in 0–8).
-    weighted_median_levels : int
-        Apply the weighted median on the finest this many pyramid levels only
-        (each level costs 0.64 of the next finer one at η = 0.8, and the flow
-        edges of the coarse levels are rough anyway); 0: on every level.
-        Default 0 (``tvl1`` sets 3).
-    weighted_median_every_warp : bool
-        Apply the weighted median after every warp, as Sun, Roth & Black do,
-        instead of after each level's last warp only; about five times its cost
-        (with ``tvl1``: a third more time on a 1024×436 pair) for about the same
-        accuracy (benchmarks/README.md, session 7).  Default False.
-    structure_texture : bool
-        Run on the texture part ``I - α ROF(I)`` (Wedel et al. 2009).  Default True.
-    texture_alpha : float
-        α of the structure-texture blend ``I - α ROF(I)``, in [0, 1]; the original
-        paper uses 0.95.  Default 0.65 (tuned: mean Middlebury AEE 0.284, against
-        0.320 with 0.95).
-    rof_theta : float
-        θ of the ROF model used for the structure part (intensity units, images in
-        [0, 1]).  Default 0.125.
-    rof_iterations : int
-        Iterations of the ROF solver.  Default 50.
-    pyramid_sigma : float
-        Anti-alias smoothing: σ = pyramid_sigma · sqrt(η^(-2l) − 1) at level l.
-        Default 0.6.
-    sharpness_match : bool
-        Before anything else, blur the sharper frame by a Gaussian until both frames
-        are equally sharp when their sharpness (mean |∇I|² / var I) differs by more
-        than :data:`varflow.ops.sharpness.SHARPNESS_TOLERANCE` in log units (one frame
-        motion-blurred or out of focus); pairs of equal sharpness are untouched.
-        Two-frame methods only (:func:`coarse_to_fine`).  Default False.
-    grey : bool
-        Work on the mean of the colour channels (one channel, as DeepFlow does)
-        instead of one data residual per channel: about a third of the data-term
-        work per iteration.  Applied before everything else, the noise rule and
-        the sharpness match included (:func:`working_channels`).  Default False
-        (``tvl1`` sets it).
-    """
-
-    scale_factor: float = 0.8
-    max_levels: int = 40
-    min_size: int = 16
-    n_warps: int = 5
-    median_size: int = 5
-    weighted_median_radius: int = 0
-    weighted_median_sigma_space: float = 7.0
-    weighted_median_sigma_colour: float = 0.05
-    weighted_median_threshold: float = 0.5
-    weighted_median_sigma_divergence: float = 0.3
-    weighted_median_noise: float = 5.0
-    weighted_median_levels: int = 0
-    weighted_median_every_warp: bool = False
-    structure_texture: bool = True
-    texture_alpha: float = 0.65
-    rof_theta: float = 0.125
-    rof_iterations: int = 50
-    pyramid_sigma: float = 0.6
-    sharpness_match: bool = False
-    grey: bool = False
-
-    def __post_init__(self) -> None:
-        _check(
-            0.0 < self.scale_factor < 1.0,
-            "scale_factor",
-            f"must be in (0, 1), got {self.scale_factor}",
-        )
-        _check(self.max_levels >= 1, "max_levels", f"must be >= 1, got {self.max_levels}")
-        _check(self.min_size >= 2, "min_size", f"must be >= 2, got {self.min_size}")
-        _check(self.n_warps >= 1, "n_warps", f"must be >= 1, got {self.n_warps}")
-        _check(
-            self.median_size >= 0 and (self.median_size <= 1 or self.median_size % 2 == 1),
-            "median_size",
-            f"must be 0, 1 or an odd integer, got {self.median_size}",
-        )
-        for name in ("weighted_median_radius", "weighted_median_levels"):
-            value = getattr(self, name)
-            _check(value >= 0, name, f"must be >= 0, got {value}")
-        for name in ("weighted_median_sigma_space", "weighted_median_sigma_colour"):
-            value = getattr(self, name)
-            _check(math.isfinite(value) and value > 0, name,
-                   f"must be a finite number > 0, got {value}")
-        for name in ("weighted_median_threshold", "weighted_median_sigma_divergence",
-                     "weighted_median_noise"):
-            value = getattr(self, name)
-            _check(math.isfinite(value) and value >= 0, name,
-                   f"must be a finite number >= 0, got {value}")
-        _check(
-            0.0 <= self.texture_alpha <= 1.0,
-            "texture_alpha",
-            f"must be in [0, 1], got {self.texture_alpha}",
-        )
-        _check(self.rof_theta > 0, "rof_theta", f"must be > 0, got {self.rof_theta}")
-        _check(
-            self.rof_iterations >= 1, "rof_iterations", f"must be >= 1, got {self.rof_iterations}"
-        )
-        _check(self.pyramid_sigma >= 0, "pyramid_sigma", f"must be >= 0, got {self.pyramid_sigma}")
-
-    def replace(self, **changes: Any):
-        """Return a copy with some fields changed (validated again)."""
-        return dataclasses.replace(self, **changes)
-
-    def for_frames(self, I0: np.ndarray, I1: np.ndarray, stats: dict) -> CoarseToFineParams:
-        """The parameters to use on this pair of frames (``self`` here).
-
-        Methods whose weights follow the frames (see ``noise_reference`` of
-        :class:`varflow.twoframe.tvl1.TVL1Params`) override it; they may record
-        what they read in ``stats``.
-        """
-        return self
-
-    def level_warps(self, shape: tuple[int, int]) -> int:
-        """Number of warps at a pyramid level of size ``shape`` (``n_warps`` here).
-
-        Methods whose levels have extra stages (e.g. the sparse stage of
-        :mod:`varflow.twoframe.sparse`) override it; the driver tells the solver
-        which warp it is in ``state.warp``.
-        """
-        return self.n_warps
-
-
 @dataclass
 class LevelState:
-    """What a warp solver keeps for one pyramid level (a new one per level).
+    """What the driver keeps for one pyramid level (a new one per level).
 
-    The driver sets ``level``, ``warp``, ``previous`` and ``stats``; the solvers of
-    the TV-L1 family fill the rest on the level's first warp
-    (:func:`varflow.twoframe.tvl1.init_level_state`) and update them in place.
+    The driver sets ``level``, ``warp``, ``previous`` and ``stats``; ``data`` is the
+    solver's own state of the level (e.g. :class:`varflow.twoframe.tvl1.TVL1State`),
+    which the solver creates on the level's first warp and the driver never reads.
 
     Attributes
     ----------
@@ -268,43 +101,15 @@ class LevelState:
         The coarser level's state (its own ``previous`` dropped), for warm starts.
     warp : int
         Index of the current warp at this level.
-    iterations : int
-        Primal-dual iterations run at this level so far.
-    g : ndarray, shape (h, w), float32, or None
-        Radius of the TV dual ball: the edge weight g(x).
-    tensor : ndarray, shape (3, h, w), float32, or None
-        ``T = D^{1/2}`` as (T11, T12, T22) of tensor-directed TV; None: isotropic.
-    p, tp : ndarray, shape (4, h, w), float32, or None
-        TV dual variables (p1x, p1y, p2x, p2y) and ``T p`` (``tp is p`` when isotropic).
-    q : ndarray, shape (C, h, w), float32, or None
-        Dual variables of the data prox's colour channels (warm started across warps).
-    q_all : ndarray, shape (K, h, w), float32, or None
-        The data prox's duals of every channel when the data term has more than the
-        colour channels (``q`` is then a view of its first planes).
-    grad0 : ndarray or tuple or None
-        The smoothed derivatives of the first frame for gradient constancy
-        (:func:`varflow.twoframe.tvl1.data_channels`).
-    dictionaries : list or None
-        The sparse regulariser's dictionaries at this level
-        (:mod:`varflow.twoframe.sparse`).
-    coverage : ndarray, shape (h, w), float32, or None
-        The sparse term's per-pixel weight.
+    data : object or None
+        The solver's state of this level.
     """
 
     level: int = 0
     stats: dict = dataclasses.field(default_factory=dict)
     previous: LevelState | None = None
     warp: int = 0
-    iterations: int = 0
-    g: np.ndarray | None = None
-    tensor: np.ndarray | None = None
-    p: np.ndarray | None = None
-    tp: np.ndarray | None = None
-    q: np.ndarray | None = None
-    q_all: np.ndarray | None = None
-    grad0: Any = None
-    dictionaries: list | None = None
-    coverage: np.ndarray | None = None
+    data: Any = None
 
 
 class WarpSolver(Protocol):
@@ -321,7 +126,7 @@ class WarpSolver(Protocol):
     ) -> np.ndarray: ...
 
 
-def working_channels(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
+def working_channels(image: np.ndarray, params: TVL1Params) -> np.ndarray:
     """The channels a method works on: the frame itself, or with ``params.grey`` the
     mean of its channels, ``(H, W, 1)`` float32 (a one-channel frame is returned as is).
     """
@@ -330,7 +135,7 @@ def working_channels(image: np.ndarray, params: CoarseToFineParams) -> np.ndarra
     return np.mean(image, axis=2, keepdims=True, dtype=np.float32)
 
 
-def preprocess(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
+def preprocess(image: np.ndarray, params: TVL1Params) -> np.ndarray:
     """Apply the configured pre-processing to an ``(H, W, C)`` float image."""
     if params.structure_texture:
         return structure_texture(
@@ -339,7 +144,7 @@ def preprocess(image: np.ndarray, params: CoarseToFineParams) -> np.ndarray:
     return image
 
 
-def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
+def prepare_pyramid(frame: np.ndarray, params: TVL1Params,
                     shapes: list[tuple[int, int]] | None = None) -> list[np.ndarray]:
     """Pre-process one ``(H, W, C)`` float frame and build its pyramid (finest first).
 
@@ -351,7 +156,7 @@ def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
     Parameters
     ----------
     frame : ndarray, shape (H, W, C), float32 in [0, 1]
-    params : CoarseToFineParams
+    params : TVL1Params
     shapes : list of (int, int), optional
         Level shapes; default :func:`varflow.ops.pyramid.pyramid_shapes` of ``params``.
 
@@ -367,13 +172,13 @@ def prepare_pyramid(frame: np.ndarray, params: CoarseToFineParams,
                          params.pyramid_sigma)
 
 
-def filter_flow(flow: np.ndarray, params: CoarseToFineParams,
+def filter_flow(flow: np.ndarray, params: TVL1Params,
                 guide: np.ndarray | None, last_warp: bool = True, level: int = 0) -> np.ndarray:
     """The filtering of the flow after a warp: the plain median (``median_size``),
     and with ``weighted_median_radius`` > 0 the weighted median near motion
     boundaries, guided by ``guide`` ``(h, w, C)``, after a level's last warp
     (``last_warp``) or every warp, on pyramid level ``level`` (0 = finest) if
-    it is one of the ``weighted_median_levels`` finest (see :class:`CoarseToFineParams`).
+    it is one of the ``weighted_median_levels`` finest (see :class:`TVL1Params`).
 
     Returns ``flow`` itself when both are off.
     """
@@ -389,8 +194,8 @@ def filter_flow(flow: np.ndarray, params: CoarseToFineParams,
     return out
 
 
-def noise_adapted(params: CoarseToFineParams, frames: tuple[np.ndarray, ...],
-                  stats: dict | None = None) -> CoarseToFineParams:
+def noise_adapted(params: TVL1Params, frames: tuple[np.ndarray, ...],
+                  stats: dict | None = None) -> TVL1Params:
     """``params`` with the weighted median's colour σ_c widened by the frames' noise.
 
     σ_c' = sqrt(σ_c² + (k σ̂)²), ``k = params.weighted_median_noise``, σ̂ the mean of
@@ -412,7 +217,7 @@ def noise_adapted(params: CoarseToFineParams, frames: tuple[np.ndarray, ...],
     return dataclasses.replace(params, weighted_median_sigma_colour=sc)
 
 
-def guide_pyramid(frame: np.ndarray, params: CoarseToFineParams,
+def guide_pyramid(frame: np.ndarray, params: TVL1Params,
                   shapes: list[tuple[int, int]]) -> list[np.ndarray] | None:
     """The pyramid of ``frame`` (H, W, C) float32 in [0, 1], before any pre-processing,
     on the level ``shapes``, that guides the weighted median; None when
@@ -427,7 +232,7 @@ def coarse_to_fine(
     frame0: np.ndarray,
     frame1: np.ndarray,
     solve_warp: WarpSolver,
-    params: CoarseToFineParams,
+    params: TVL1Params,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
@@ -443,7 +248,7 @@ def coarse_to_fine(
         :mod:`varflow._validate`).
     solve_warp : callable
         The method's single-level, single-warp solver (see module docstring).
-    params : CoarseToFineParams (or a subclass)
+    params : TVL1Params
     init_flow : ndarray, shape (H, W, 2), optional
         Initial flow at full resolution; it is downsampled to the coarsest level run.
     callback : callable, optional
@@ -493,7 +298,7 @@ def coarse_to_fine_pyramids(
     pyr0: list[np.ndarray],
     pyr1: list[np.ndarray],
     solve_warp: WarpSolver,
-    params: CoarseToFineParams,
+    params: TVL1Params,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
@@ -583,7 +388,7 @@ WarpStep = Callable[[Any, np.ndarray, int], np.ndarray]
 def run_levels(
     flows: np.ndarray,
     shapes: list[tuple[int, int]],
-    params: CoarseToFineParams,
+    params: TVL1Params,
     start_level: LevelStart,
     warp_step: WarpStep,
     guide: list[np.ndarray] | None = None,
@@ -601,7 +406,7 @@ def run_levels(
     level's (``previous``) and no more: ``previous.previous`` is dropped.
 
     The two-frame driver (:func:`coarse_to_fine_pyramids`) runs it on one flow, the
-    multi-frame refinement (:func:`varflow.multiframe.rlr.refine_trajectories`) on
+    multi-frame refinement (:func:`varflow.multiframe.refine.refine_trajectories`) on
     the ``F`` displacement fields of a clip.
 
     Parameters
@@ -611,7 +416,7 @@ def run_levels(
         updated in place while they have a level's size.
     shapes : list of (int, int)
         The levels to run, finest first (the last is run first).
-    params : CoarseToFineParams
+    params : TVL1Params
         Warps per level and the filters.
     start_level : callable
         :data:`LevelStart`.

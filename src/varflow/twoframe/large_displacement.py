@@ -25,8 +25,9 @@ feature matching, in three stages:
    refinement removes their errors.  Where the motion is small the two candidates
    agree and the result is that of ``tvl1``.
 
-Every field of :class:`TVL1Params` keeps its meaning; the ``match_*``,
-``interp_*`` and ``fusion_*`` fields are the stages' own.
+The parameters are a :class:`~varflow.twoframe.params.TVL1Params` (every field keeps
+its meaning) whose ``matching`` term, a :class:`~varflow.twoframe.params.MatchingTerm`,
+holds the stages' own ``match_*``, ``interp_*`` and ``fusion_*`` fields.
 
 References
 ----------
@@ -48,169 +49,33 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
-from .._validate import check_pair
+from .._validate import check_field, check_pair
 from ..ops.fusion import candidate_costs
-from ..ops.interpolation import InterpParams, interpolate
-from ..ops.matching import MatchParams, match
+from ..ops.interpolation import interpolate
+from ..ops.matching import match
 from ..ops.pyramid import resize_bilinear, resize_flow, smooth_image_fast
-from .coarse_to_fine import ProgressCallback, _check, coarse_to_fine
-from .tvl1 import TVL1Params, solve_warp
+from .coarse_to_fine import ProgressCallback, coarse_to_fine
+from .params import PRESETS, MatchingTerm, TVL1Params, deprecated_preset
+from .tvl1 import solve_warp
 
-__all__ = ["LargeDisplacementParams", "fusion_hook", "matching_flow", "tvl1_ld"]
+__all__ = ["MatchingTerm", "LargeDisplacementParams", "fusion_hook", "matching_flow", "tvl1_ld"]
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class LargeDisplacementParams(TVL1Params):
-    """Parameters of ``tvl1-ld`` (every :class:`TVL1Params` field too).
+LargeDisplacementParams = deprecated_preset("LargeDisplacementParams", "tvl1-ld")
 
-    Defaults were chosen on the tuning split of the large-motion generator
-    (:mod:`varflow.generators.large_pairs`, seeds 0-3) under the constraint that the
-    Middlebury mean stays within 2 % of ``tvl1``'s (benchmarks/README.md).  Every
-    :class:`TVL1Params` default (the ``tvl1`` model: grey channel, gradient term,
-    Huber-TV) is kept except ``n_warps`` = 3 (the matching carries the large
-    motion).  On that model: tuning split 2.07 px, Middlebury 0.2724 against
-    ``tvl1``'s 0.2677 (with the interpolation on at most 2**17 pixels and K = 32,
-    chosen for speed in session 5; before, 2.15 px and 0.2719); the stages were
-    tuned on the plain energy (2.16 px, Middlebury 0.287 against its 0.284).
-    Since ``tvl1`` took the weighted median (issue 11), ``tvl1-ld`` keeps it on
-    every level and the 30 iterations per warp that ``tvl1`` dropped to 24: tuning
-    split 1.81 px (1.98 with ``tvl1``'s 3 levels and 24 iterations, 1.88 with
-    every level and 24).
 
-    Attributes
-    ----------
-    weighted_median_levels : int
-        As in :class:`varflow.twoframe.coarse_to_fine.CoarseToFineParams`.
-        Default 0 (every level; ``tvl1`` 3).
-    max_iterations : int
-        As in :class:`TVL1Params`.  Default 30 (``tvl1`` 24).
-    match_step : int
-        d, spacing in pixels of the seed grid of the matching
-        (:class:`varflow.ops.matching.MatchParams` ``step``).  Default 4 (3: tuning
-        split 2.22 px against 2.16, and 1.3 x the matching and interpolation time).
-    match_levels : int
-        k, pyramid levels of the matching (factor 1/2 each).  Default 4.
-    match_iterations : int
-        n, PatchMatch sweeps per matching level (:class:`~varflow.ops.matching.MatchParams`
-        ``iterations``).  Default 6 (4: tuning split 2.20 px against 2.09).
-    match_max_displacement : float
-        Largest displacement searched at the coarsest matching level, pixels.
-        Default 160.
-    match_fb_threshold : float
-        Forward-backward tolerance of a kept match, pixels of the matched images.
-        Default 3.
-    match_scale : float
-        The matching and the interpolation run on the frames resized by this factor
-        (in (0, 1]; Gaussian pre-smoothing σ = 0.6/scale − 0.6 px against aliasing),
-        and their flow is resized back: the variational refinement restores the
-        detail, and the cost falls with the area.  Default 1.
-    interp_max_pixels : int
-        The interpolation (its geodesic distances, Voronoi cells and rendering) runs
-        on the matched frame resized to at most this many pixels (the matches keep
-        their positions, scaled to that grid), and its flow is resized back.  The
-        geodesic Voronoi partition, a sequential Dijkstra over every pixel, is the
-        largest cost of the stage; the variational refinement restores the detail.
-        Default 2**17 = 131072 (a 1024x436 frame is interpolated at 0.54 of its
-        size, the 384x512 generator pairs at 0.82; with ``interp_k`` = 32 the
-        tuning split went from 2.15 to 2.07 px and the stage's time from about
-        0.75 s to 0.3 s per Sintel pair).
-    interp_k : int
-        K, geodesically nearest matches of each match in its locally affine model
-        (:class:`varflow.ops.interpolation.InterpParams` ``k``).  Default 32 (the
-        per-seed Dijkstra of the K nearest seeds costs in proportion; on the tuning
-        split, interpolating at half size, 32 gave 2.09 px, 48 2.07 and 64 2.16).
-    interp_a : float
-        a, scale of the interpolation kernel ``exp(-a D)`` over geodesic distances
-        D.  Default 1.
-    fusion_radius : int
-        R of the fusion cost's ``(2R + 1)²`` window (pixels of the level).  Default 2.
-    fusion_gamma : float
-        γ_f, colour scale of the adaptive support weights (sum of absolute channel
-        differences).  Default 0.1.
-    fusion_truncation : float
-        T, the largest photometric residual of a pixel in the fusion cost
-        (intensity units).  Default 0.1.
-    fusion_threshold : float
-        τ, pixels of the level: only where the two candidates differ by more than
-        τ may the matching candidate replace the carried flow (where they agree,
-        the variational flow is the more accurate one).  Default 1.
-    fusion_min_size : int
-        The matching candidate is offered only on levels whose smaller side has at
-        least this many pixels (the coarsest levels are too blurred to judge it).
-        Default 24.
-    support_radius : int
-        A pixel's matching flow is supported when a seed within this many grid steps
-        of its nearest seed kept its match (0: the nearest seed itself).  Default 0.
-    min_matches : int
-        Fewer surviving matches than this and the method is plain ``tvl1`` (no
-        candidate).  Default 16.
-    """
-
-    n_warps: int = 3
-    weighted_median_levels: int = 0
-    max_iterations: int = 30
-    match_step: int = 4
-    match_levels: int = 4
-    match_iterations: int = 6
-    match_max_displacement: float = 160.0
-    match_fb_threshold: float = 3.0
-    match_scale: float = 1.0
-    interp_max_pixels: int = 1 << 17
-    interp_k: int = 32
-    interp_a: float = 1.0
-    fusion_radius: int = 2
-    fusion_gamma: float = 0.1
-    fusion_truncation: float = 0.1
-    fusion_threshold: float = 1.0
-    fusion_min_size: int = 24
-    support_radius: int = 0
-    min_matches: int = 16
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _check(isinstance(self.support_radius, int | np.integer) and self.support_radius >= 0,
-               "support_radius", f"must be an integer >= 0, got {self.support_radius!r}")
-        for name in ("match_step", "match_levels", "match_iterations", "interp_k",
-                     "fusion_min_size", "min_matches"):
-            value = getattr(self, name)
-            _check(isinstance(value, int | np.integer) and not isinstance(value, bool)
-                   and value >= 1, name, f"must be an integer >= 1, got {value!r}")
-        _check(isinstance(self.fusion_radius, int | np.integer) and self.fusion_radius >= 0,
-               "fusion_radius", f"must be an integer >= 0, got {self.fusion_radius!r}")
-        _check(math.isfinite(self.fusion_threshold) and self.fusion_threshold >= 0,
-               "fusion_threshold", f"must be a finite number >= 0, got {self.fusion_threshold}")
-        _check(0.0 < self.match_scale <= 1.0, "match_scale",
-               f"must be in (0, 1], got {self.match_scale}")
-        _check(isinstance(self.interp_max_pixels, int | np.integer)
-               and not isinstance(self.interp_max_pixels, bool)
-               and self.interp_max_pixels >= 64, "interp_max_pixels",
-               f"must be an integer >= 64, got {self.interp_max_pixels!r}")
-        for name in ("match_max_displacement", "match_fb_threshold", "interp_a",
-                     "fusion_gamma", "fusion_truncation"):
-            value = getattr(self, name)
-            _check(math.isfinite(value) and value > 0, name,
-                   f"must be a finite number > 0, got {value}")
-        self.match_params()  # the stages check their own fields too
-        self.interp_params()
-
-    def match_params(self) -> MatchParams:
-        """The :class:`~varflow.ops.matching.MatchParams` of the matching stage."""
-        return MatchParams(step=int(self.match_step), levels=int(self.match_levels),
-                           iterations=int(self.match_iterations),
-                           max_displacement=float(self.match_max_displacement
-                                                  * self.match_scale),
-                           fb_threshold=float(self.match_fb_threshold))
-
-    def interp_params(self) -> InterpParams:
-        """The :class:`~varflow.ops.interpolation.InterpParams` of the interpolation."""
-        return InterpParams(k=int(self.interp_k), a=float(self.interp_a))
+def _matching(params: MatchingTerm | TVL1Params | None) -> MatchingTerm:
+    """The matching term of ``params`` (an energy with one, the term itself, or None:
+    ``tvl1-ld``'s)."""
+    if params is None:
+        return PRESETS["tvl1-ld"].matching
+    return params.matching if isinstance(params, TVL1Params) else params
 
 
 def _support(grid_flow: np.ndarray, step: int, shape: tuple[int, int],
@@ -236,7 +101,7 @@ def _downscale(image: np.ndarray, scale: float) -> np.ndarray:
 
 
 def _interpolate_scaled(image: np.ndarray, points: np.ndarray, flow: np.ndarray,
-                        params: LargeDisplacementParams) -> np.ndarray:
+                        params: MatchingTerm) -> np.ndarray:
     """The interpolation of ``(points, flow)`` over ``image``, on at most ``interp_max_pixels``.
 
     A larger image is reduced by :func:`_downscale` with ``s = sqrt(max_pixels / (H W))``,
@@ -257,7 +122,7 @@ def _interpolate_scaled(image: np.ndarray, points: np.ndarray, flow: np.ndarray,
 def matching_flow(
     frame0: np.ndarray,
     frame1: np.ndarray,
-    params: LargeDisplacementParams | None = None,
+    params: MatchingTerm | TVL1Params | None = None,
     stats: dict | None = None,
 ) -> np.ndarray | None:
     """The dense flow ``w_m`` of the matches (stages 1 and 2 of the module notes).
@@ -266,7 +131,8 @@ def matching_flow(
     ----------
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
         uint8, uint16 or float (see :func:`varflow._validate.check_pair`).
-    params : LargeDisplacementParams, optional
+    params : MatchingTerm or TVL1Params, optional
+        The matching term (or an energy that has one); default ``tvl1-ld``'s.
     stats : dict, optional
         Filled with ``matches`` (kept), ``match_seconds`` and ``interp_seconds``.
 
@@ -277,7 +143,7 @@ def matching_flow(
         match; see the module notes); None when fewer than ``min_matches`` matches
         survive.
     """
-    params = params or LargeDisplacementParams()
+    params = _matching(params)
     stats = {} if stats is None else stats
     I0, I1 = check_pair(frame0, frame1)
     t0 = time.perf_counter()
@@ -302,13 +168,14 @@ def matching_flow(
     return dense
 
 
-def fusion_hook(candidate: np.ndarray, params: LargeDisplacementParams):
+def fusion_hook(candidate: np.ndarray, params: MatchingTerm | TVL1Params):
     """The level hook that fuses the carried flow with ``candidate`` (module notes, 3).
 
     ``candidate`` is NaN where it is not supported; there it never replaces the flow
     (NaN pixels take their nearest supported value before the candidate is resampled
     to a level, so that they do not pull the supported ones near them).
     """
+    params = _matching(params)
     valid = np.isfinite(candidate[..., 0])
     known = valid[..., None].astype(np.float32)
     if valid.all() or not valid.any():
@@ -341,7 +208,7 @@ def fusion_hook(candidate: np.ndarray, params: LargeDisplacementParams):
 def tvl1_ld(
     frame0: np.ndarray,
     frame1: np.ndarray,
-    params: LargeDisplacementParams | None = None,
+    params: TVL1Params | None = None,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
@@ -352,7 +219,8 @@ def tvl1_ld(
     ----------
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
         uint8, uint16 or float.
-    params : LargeDisplacementParams, optional
+    params : TVL1Params, optional
+        An energy with a ``matching`` term; default the ``tvl1-ld`` preset.
     init_flow : ndarray, shape (H, W, 2), optional
         Initial flow of the coarse-to-fine stage.
     callback : callable, optional
@@ -366,10 +234,12 @@ def tvl1_ld(
     -------
     ndarray, shape (H, W, 2), float32
     """
-    params = params or LargeDisplacementParams()
+    params = params or PRESETS["tvl1-ld"]
+    check_field(params.matching is not None, "matching",
+                "tvl1-ld needs a MatchingTerm (the 'tvl1-ld' preset has one)")
     stats = {} if stats is None else stats
     I0, I1 = check_pair(frame0, frame1)
-    candidate = matching_flow(I0, I1, params, stats)
-    hook = None if candidate is None else fusion_hook(candidate, params)
+    candidate = matching_flow(I0, I1, params.matching, stats)
+    hook = None if candidate is None else fusion_hook(candidate, params.matching)
     return coarse_to_fine(I0, I1, solve_warp, params, init_flow=init_flow, callback=callback,
                           stats=stats, level_hook=hook)

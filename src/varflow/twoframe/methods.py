@@ -1,167 +1,140 @@
-"""The registry of two-frame methods: a plain dict that the trackers, the API, the CLI and the
-benchmarks read (re-exported by :mod:`varflow.registry`).
+"""The two-frame flow methods, registered in :data:`varflow.registry.FLOW`.
 
-:data:`METHODS` maps a two-frame method name to a :class:`Method`: its frozen
-parameter dataclass, its single-level warp solver (plugged into
-:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`), a one-line description and,
-for a method with stages around the driver (``tvl1-ld``), the function that runs it.
-:func:`run_method` runs one, as :func:`varflow.flow` does.  It lives in the
-two-frame package so that the multi-frame methods, which build on any two-frame
-method, can use it without importing :mod:`varflow.registry` (which lists them).
+Each :class:`~varflow.registry.Method` names a preset of
+:class:`~varflow.twoframe.params.TVL1Params` (:data:`~varflow.twoframe.params.PRESETS`),
+its single-level warp solver (plugged into
+:func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`), a one-line description, its
+memory model and kernels and, for a method with stages around the driver
+(``tvl1-ld``), the function that runs it.  :func:`run_method` runs one, as
+:func:`varflow.flow` does; :func:`resolve_flow_params` serves the parameter classes
+of the methods built on a two-frame method (trackers, interpolators).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from .._validate import check_field
+from ..registry import DEFAULT_METHOD, FLOW, MemoryFactors, Method
 from . import large_displacement as _ld
 from . import sparse as _sparse
 from . import tensor as _tensor
 from . import tvl1 as _tvl1
-from .coarse_to_fine import CoarseToFineParams, ProgressCallback, WarpSolver, coarse_to_fine
+from .coarse_to_fine import ProgressCallback, coarse_to_fine
+from .params import PRESETS, TVL1Params
 
-__all__ = ["DEFAULT_METHOD", "Method", "METHODS", "get_method", "run_method"]
+__all__ = ["DEFAULT_METHOD", "Method", "METHODS", "FlowChoice", "get_method", "run_method",
+           "resolve_flow_params"]
 
-#: The method of :func:`varflow.flow` when none is named, and of the trackers built on
-#: two-frame flows (``twoframe``, ``chain``).
-DEFAULT_METHOD = "tvl1"
+METHODS = FLOW
 
-
-@dataclass(frozen=True)
-class Method:
-    """A registered two-frame method.
-
-    Attributes
-    ----------
-    name : str
-    params : type
-        Frozen dataclass of its parameters (a :class:`CoarseToFineParams` subclass).
-    solve_warp : callable
-        Single-level, single-warp solver.
-    description : str
-    run : callable, optional
-        ``run(frame0, frame1, params, init_flow=None, callback=None, stats=None)``
-        for a method whose pipeline has stages around the coarse-to-fine driver
-        (which it calls with ``solve_warp``); None: the driver alone.
-    """
-
-    name: str
-    params: type[CoarseToFineParams]
-    solve_warp: WarpSolver
-    description: str
-    run: Callable[..., Any] | None = None
+_MIB = 2**20
+_TVL1 = ("varflow.twoframe.tvl1:tvl1_iterations",)
+_WMEDIAN = ("varflow.ops.median:_weighted_median_kernel",)
+_SPARSE = ("varflow.twoframe.sparse:nesterov_iterations", "varflow.sparse.omp:_batch_omp_kernel")
 
 
-METHODS: dict[str, Method] = {
-    "tvl1": Method(
-        name="tvl1",
-        params=_tvl1.TVL1Params,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
-        "ROF texture, median)",
-    ),
-    "tvl1-fast": Method(
-        name="tvl1-fast",
-        params=_tvl1.TVL1FastParams,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
-    ),
-    "tvl1-ld": Method(
-        name="tvl1-ld",
-        params=_ld.LargeDisplacementParams,
-        solve_warp=_tvl1.solve_warp,
-        description="TV-L1 for large displacements (PatchMatch matches, edge-aware "
-        "interpolation, fused per level)",
-        run=_ld.tvl1_ld,
-    ),
-    "tensor": Method(
-        name="tensor",
-        params=_tensor.TensorParams,
-        solve_warp=_tensor.solve_warp,
-        description="tensor-directed TV-L1 (anisotropic TV following image structure)",
-    ),
-    "sparse-dct": Method(
-        name="sparse-dct",
-        params=_sparse.SparseDCTParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, fixed overcomplete DCT dictionary",
-    ),
-    "sparse-1d": Method(
-        name="sparse-1d",
-        params=_sparse.Sparse1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionary shared by u and v",
-    ),
-    "sparse-2x1d": Method(
-        name="sparse-2x1d",
-        params=_sparse.Sparse2x1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionaries for u and for v",
-    ),
-    "sparse-2d": Method(
-        name="sparse-2d",
-        params=_sparse.Sparse2DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
-    ),
-    # the same regularisers on tvl1's energy (grey L1 + gradient constancy, Huber-TV,
-    # noise rule, weighted median, sharpness match); the ones above keep the book's
-    "tvl1-tensor": Method(
-        name="tvl1-tensor",
-        params=_tensor.TVL1TensorParams,
-        solve_warp=_tensor.solve_warp,
-        description="tensor-directed TV-L1 on tvl1's energy",
-    ),
-    "tvl1-sparse-dct": Method(
-        name="tvl1-sparse-dct",
-        params=_sparse.TVL1SparseDCTParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1 on tvl1's energy, fixed overcomplete DCT "
-        "dictionary",
-    ),
-    "tvl1-sparse-1d": Method(
-        name="tvl1-sparse-1d",
-        params=_sparse.TVL1Sparse1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionary shared by u "
-        "and v",
-    ),
-    "tvl1-sparse-2x1d": Method(
-        name="tvl1-sparse-2x1d",
-        params=_sparse.TVL1Sparse2x1DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionaries for u and "
-        "for v",
-    ),
-    "tvl1-sparse-2d": Method(
-        name="tvl1-sparse-2d",
-        params=_sparse.TVL1Sparse2DParams,
-        solve_warp=_sparse.solve_warp,
-        description="sparse-regularised TV-L1 on tvl1's energy, MOD dictionary of joint "
-        "[u; v] patches",
-    ),
-}
+def _preset(name: str):
+    return lambda: PRESETS[name]
+
+
+def _register(name: str, solve_warp: Any, description: str, memory: MemoryFactors,
+              kernels: tuple[str, ...], compile_seconds: int, run: Any = None) -> None:
+    FLOW.register(Method(name=name, description=description, defaults=_preset(name),
+                         memory=memory, kernels=kernels, compile_seconds=compile_seconds,
+                         solve_warp=solve_warp, run=run))
+
+
+# Memory factors: bytes per pixel measured as described in varflow._memory.
+_register("tvl1", _tvl1.solve_warp,
+          "TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
+          "ROF texture, median)",
+          MemoryFactors(base=150, per_channel=75), _TVL1 + _WMEDIAN, 40)
+_register("tvl1-fast", _tvl1.solve_warp,
+          "TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
+          MemoryFactors(base=125, per_channel=50), _TVL1, 35)
+_register("tvl1-ld", _tvl1.solve_warp,
+          "TV-L1 for large displacements (PatchMatch matches, edge-aware interpolation, "
+          "fused per level)",
+          MemoryFactors(base=455, per_channel=30),
+          _TVL1 + ("varflow.ops.matching:_patchmatch_pair",
+                   "varflow.ops.interpolation:_fit_kernel"), 60, run=_ld.tvl1_ld)
+_register("tensor", _tensor.solve_warp,
+          "tensor-directed TV-L1 (anisotropic TV following image structure)",
+          MemoryFactors(base=200, per_channel=80), _TVL1, 35)
+_register("sparse-dct", _sparse.solve_warp,
+          "sparse-regularised TV-L1, fixed overcomplete DCT dictionary",
+          MemoryFactors(base=275, per_channel=65, fixed=10 * _MIB), _SPARSE, 60)
+_register("sparse-1d", _sparse.solve_warp,
+          "sparse-regularised TV-L1, MOD dictionary shared by u and v",
+          MemoryFactors(base=255, per_channel=55, fixed=16 * _MIB), _SPARSE, 60)
+_register("sparse-2x1d", _sparse.solve_warp,
+          "sparse-regularised TV-L1, MOD dictionaries for u and for v",
+          MemoryFactors(base=250, per_channel=55, fixed=5 * _MIB), _SPARSE, 60)
+_register("sparse-2d", _sparse.solve_warp,
+          "sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
+          MemoryFactors(base=280, per_channel=45, fixed=8 * _MIB), _SPARSE, 60)
+# the same regularisers on tvl1's energy (grey L1 + gradient constancy, Huber-TV,
+# noise rule, weighted median, sharpness match); the ones above keep the book's
+_register("tvl1-tensor", _tensor.solve_warp, "tensor-directed TV-L1 on tvl1's energy",
+          MemoryFactors(base=200, per_channel=80), _TVL1 + _WMEDIAN, 40)
+_register("tvl1-sparse-dct", _sparse.solve_warp,
+          "sparse-regularised TV-L1 on tvl1's energy, fixed overcomplete DCT dictionary",
+          MemoryFactors(base=275, per_channel=65, fixed=10 * _MIB), _SPARSE + _WMEDIAN, 65)
+_register("tvl1-sparse-1d", _sparse.solve_warp,
+          "sparse-regularised TV-L1 on tvl1's energy, MOD dictionary shared by u and v",
+          MemoryFactors(base=255, per_channel=55, fixed=16 * _MIB), _SPARSE + _WMEDIAN, 65)
+_register("tvl1-sparse-2x1d", _sparse.solve_warp,
+          "sparse-regularised TV-L1 on tvl1's energy, MOD dictionaries for u and for v",
+          MemoryFactors(base=250, per_channel=55, fixed=5 * _MIB), _SPARSE + _WMEDIAN, 65)
+_register("tvl1-sparse-2d", _sparse.solve_warp,
+          "sparse-regularised TV-L1 on tvl1's energy, MOD dictionary of joint [u; v] "
+          "patches",
+          MemoryFactors(base=280, per_channel=45, fixed=8 * _MIB), _SPARSE + _WMEDIAN, 65)
 
 
 def get_method(name: str) -> Method:
     """Look a method up by name; unknown names raise ``ValueError`` listing the choices."""
+    return FLOW.entry(name)
+
+
+class FlowChoice(Protocol):
+    """The parameters of a method built on a two-frame method: its name and parameters."""
+
+    flow_method: str
+    flow_params: TVL1Params
+
+
+def resolve_flow_params(owner: Any, default_flow_params: Any) -> None:
+    """Check and complete the two-frame choice of a parameter object, in its
+    ``__post_init__``: ``owner.flow_method`` must name a method of :data:`FLOW`;
+    ``owner.flow_params`` None becomes ``default_flow_params(flow_method)``; the
+    result must suit the method (its preset's terms).
+
+    Raises
+    ------
+    ValueError
+        Naming ``flow_method`` or ``flow_params``.
+    """
+    method = FLOW.get(owner.flow_method) if isinstance(owner.flow_method, str) else None
+    check_field(method is not None, "flow_method",
+                f"unknown two-frame method {owner.flow_method!r}; available: "
+                f"{', '.join(FLOW.names())}")
+    if owner.flow_params is None:
+        object.__setattr__(owner, "flow_params", default_flow_params(owner.flow_method))
     try:
-        return METHODS[name]
-    except KeyError:
-        raise ValueError(
-            f"method: unknown method {name!r}; available: {', '.join(sorted(METHODS))}"
-        ) from None
+        method.check_params(owner.flow_params)
+    except ValueError as exc:
+        raise ValueError(f"flow_params: {str(exc).removeprefix('params: ')}") from None
 
 
 def run_method(
     method: Method,
     frame0: np.ndarray,
     frame1: np.ndarray,
-    params: CoarseToFineParams,
+    params: TVL1Params,
     init_flow: np.ndarray | None = None,
     callback: ProgressCallback | None = None,
     stats: dict | None = None,
@@ -173,8 +146,8 @@ def run_method(
     method : Method
     frame0, frame1 : ndarray, shape (H, W) or (H, W, C)
         As for :func:`varflow.flow`.
-    params : CoarseToFineParams
-        An instance of ``method.params``.
+    params : TVL1Params
+        The method's parameters (:meth:`varflow.registry.Registry.make_params`).
     init_flow, callback, stats
         As for :func:`varflow.flow`.
 

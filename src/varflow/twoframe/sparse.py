@@ -74,7 +74,6 @@ from ..ops.prox import (
 )
 from ..sparse import (
     PatchGrid,
-    check_layout,
     layout_dct,
     learn_mod,
     merge_problems,
@@ -82,21 +81,24 @@ from ..sparse import (
     reconstruct,
     split_problems,
 )
-from .coarse_to_fine import LevelState, _check
-from .tensor import FULL_ENERGY_TENSOR_A, TensorFields, init_tensor_level
+from .coarse_to_fine import LevelState
+from .params import SparseTerm, TVL1Params, deprecated_preset
+from .tensor import init_tensor_level
 from .tvl1 import (
-    PlainTVL1Params,
-    TVL1Params,
+    TVL1State,
     data_channels,
     data_duals,
     edge_weight,
     init_level_state,
     kernel_tensor,
+    level_state,
     planar,
     run_warp,
 )
 
 __all__ = [
+    "SparseTerm",
+    "SparseState",
     "SparseFields",
     "SparseParams",
     "SparseDCTParams",
@@ -124,286 +126,38 @@ _F0 = np.float32(0.0)
 _F1 = np.float32(1.0)
 
 
-@dataclass(frozen=True)
-class SparseFields(TensorFields):
-    """The fields of the sparse term (and of the tensor regulariser), to compose onto a
-    TV-L1 energy.
-
-    A mixin, like :class:`~varflow.twoframe.tensor.TensorFields`: put it before a
-    :class:`~varflow.twoframe.tvl1.TVL1Params` subclass in the bases; its checks run
-    after those of the energy.  :class:`SparseParams` composes it with the book's
-    plain energy, :class:`TVL1SparseParams` with ``tvl1``'s.
-
-    Attributes
-    ----------
-    regulariser : str
-        "tv" (isotropic, edge-weighted TV) or "tensor" (tensor-directed TV, fields
-        ``tensor_*``).  Default "tv".
-    dictionary : str
-        "mod" (learned from the flow by MOD, bootstrapped level by level) or "dct"
-        (fixed overcomplete 2-D DCT).  Default "mod".
-    layout : str
-        "1D" (one dictionary for u and v patches), "2x1D" (one each) or "2D" (joint
-        [u; v] patches).  Default "1D".
-    n_atoms : int
-        Number of atoms of each dictionary (the book uses 400 and 800).  Default 400.
-    patch_size : int
-        m = n, side of the square flow patches, pixels.  Default 10.
-    patch_offset : int
-        k, step of the patch grid, pixels (1 = fully overlapping), 1 ≤ k ≤ m.
-        Default 5: it divides the default patch size (uniform coverage) and, on the
-        8 Middlebury pairs, makes the sparse step 11.7x faster than k = 1 for a mean
-        AEE change of +0.1 % (benchmarks/bench_sparse_offset.py).
-    omp_tolerance : float
-        μ, OMP stops when the RMS residual per patch entry is ≤ μ pixels.  Default 0.05.
-    omp_max_atoms : int
-        Maximum atoms per patch (0: no limit).  Default 16.
-    mod_iterations : int
-        MOD passes per pyramid level (book: 10).  Default 10.
-    mod_tolerance : float
-        MOD stops early when the representation error and the code size change by
-        less than this (relative).  Default 1e-3.
-    mod_max_signals : int
-        MOD trains on the patches of the offset-k grid (so k sets the cost of learning
-        as well as of coding), at most this many, drawn at random (seeded); 0 = all.
-        Default 0.
-    sparse_weight : float
-        λ_SP, weight of the sparse term at the finest level (per pixel of mean patch
-        coverage, 1/pixel²).  Default 2.
-    sparse_weight_decay : float
-        Factor applied to λ_SP per coarser level, in (0, 1].  Default 1.
-    sparse_tv_weight : float
-        λ_TV, weight of the TV term in the combined (sparse) stage, relative to the
-        TV-only stage.  Default 1.
-    sparse_warps : int
-        Warps of the combined energy per level (after the ``n_warps`` TV-only
-        warps).  Default 2.
-    sparse_min_size : int
-        Levels whose smaller side is below this skip the sparse stage (pixels, at
-        least ``patch_size``).  Default 40.
-    nesterov_iterations : int
-        Nesterov iterations per sparse warp (split over the continuation stages).
-        Default 90.
-    nesterov_stages : int
-        NESTA continuation stages: the smoothing goes from 4^(stages-1) μ down to μ.
-        Default 1: the stage starts from the TV-L1 flow of the level, which a
-        coarser smoothing would first blur (RubberWhale, λ_SP = 0, 90 iterations:
-        AEE 0.1168 with 3 stages, 0.0987 with 1, TV-L1 itself 0.0994).
-    smoothing_tv : float
-        μ_TV, Huber smoothing of the TV term (pixels/pixel); with Huber-TV (ε_H =
-        ``huber`` > 0) Nesterov's method minimises the Huber function of ε_H + μ_TV.
-        Default 0.01.
-    smoothing_data : float
-        μ_data, Huber smoothing of the L1 data term (intensity).  Default 0.01.
-    seed : int
-        Seed of the random choices (MOD training subset).  Default 0.
-    combined_solver : str
-        Solver of the combined energy at each sparse warp: "nesterov" (Nesterov's
-        method on the Huber-smoothed energy, fields ``nesterov_*`` and
-        ``smoothing_*``) or "primal-dual" (the exact TV-L1 primal-dual scheme with the
-        sparse quadratic folded into the point-wise data step,
-        :func:`sparse_pd_iterations`; fields ``tv_step``, ``data_sweeps`` and
-        ``combined_*``).  Default "nesterov".
-    combined_coupling : float
-        θ of the primal-dual iterations of a sparse warp ("primal-dual" only; the
-        TV-only warps use ``coupling``).  The result is u = ROF_θ(v) with v the
-        flow the sparse term pulls towards ū, so a tighter coupling passes more of
-        the pull on.  Default 0.1 (Middlebury mean AEE, sparse-1d: 0.2768 against
-        0.2788 with 0.3).
-    combined_iterations : int
-        Maximum primal-dual iterations per sparse warp ("primal-dual" only).
-        Default 50.
-    combined_tolerance : float
-        ε of the primal-dual iterations of a sparse warp ("primal-dual" only): stop
-        when the RMS update of the flow is below ε pixels; 0 runs all
-        ``combined_iterations``.  Default 0 (with TV-L1's ε = 0.01 the warm-started
-        iterations stop after 2-6 iterations, before the pull towards ``ū`` acts).
-    """
-
-    regulariser: str = "tv"
-    dictionary: str = "mod"
-    layout: str = "1D"
-    n_atoms: int = 400
-    patch_size: int = 10
-    patch_offset: int = 5
-    omp_tolerance: float = 0.05
-    omp_max_atoms: int = 16
-    mod_iterations: int = 10
-    mod_tolerance: float = 1e-3
-    mod_max_signals: int = 0
-    sparse_weight: float = 2.0
-    sparse_weight_decay: float = 1.0
-    sparse_tv_weight: float = 1.0
-    sparse_warps: int = 2
-    sparse_min_size: int = 40
-    nesterov_iterations: int = 90
-    nesterov_stages: int = 1
-    smoothing_tv: float = 0.01
-    smoothing_data: float = 0.01
-    seed: int = 0
-    combined_solver: str = "nesterov"
-    combined_coupling: float = 0.1
-    combined_iterations: int = 50
-    combined_tolerance: float = 0.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()  # the energy's and the tensor's checks
-        _check(self.regulariser in ("tv", "tensor"), "regulariser",
-               f"must be 'tv' or 'tensor', got {self.regulariser!r}")
-        _check(self.dictionary in ("mod", "dct"), "dictionary",
-               f"must be 'mod' or 'dct', got {self.dictionary!r}")
-        try:
-            check_layout(self.layout)
-        except ValueError:
-            raise ValueError(
-                f"layout: must be one of '1D', '2x1D', '2D', got {self.layout!r}"
-            ) from None
-        _check(self.patch_size >= 2, "patch_size", f"must be >= 2, got {self.patch_size}")
-        _check(1 <= self.patch_offset <= self.patch_size, "patch_offset",
-               f"must be in [1, patch_size={self.patch_size}], got {self.patch_offset}")
-        mn = self.patch_size**2 * (2 if self.layout == "2D" else 1)
-        _check(self.n_atoms >= 1, "n_atoms", f"must be >= 1, got {self.n_atoms}")
-        _check(self.dictionary == "dct" or self.n_atoms >= mn // 4, "n_atoms",
-               f"{self.n_atoms} atoms are too few to learn {mn}-element patches")
-        _check(self.omp_tolerance > 0, "omp_tolerance",
-               f"must be > 0, got {self.omp_tolerance}")
-        _check(self.omp_max_atoms >= 0, "omp_max_atoms",
-               f"must be >= 0, got {self.omp_max_atoms}")
-        _check(self.mod_iterations >= 1, "mod_iterations",
-               f"must be >= 1, got {self.mod_iterations}")
-        _check(self.mod_tolerance >= 0, "mod_tolerance",
-               f"must be >= 0, got {self.mod_tolerance}")
-        _check(self.mod_max_signals == 0 or self.mod_max_signals >= 100, "mod_max_signals",
-               f"must be 0 (all) or >= 100, got {self.mod_max_signals}")
-        _check(self.sparse_weight >= 0, "sparse_weight",
-               f"must be >= 0, got {self.sparse_weight}")
-        _check(0 < self.sparse_weight_decay <= 1, "sparse_weight_decay",
-               f"must be in (0, 1], got {self.sparse_weight_decay}")
-        _check(self.sparse_tv_weight > 0, "sparse_tv_weight",
-               f"must be > 0, got {self.sparse_tv_weight}")
-        _check(self.sparse_warps >= 0, "sparse_warps", f"must be >= 0, got {self.sparse_warps}")
-        _check(self.sparse_min_size >= self.patch_size, "sparse_min_size",
-               f"must be >= patch_size={self.patch_size}, got {self.sparse_min_size}")
-        _check(self.nesterov_iterations >= 1, "nesterov_iterations",
-               f"must be >= 1, got {self.nesterov_iterations}")
-        _check(1 <= self.nesterov_stages <= self.nesterov_iterations, "nesterov_stages",
-               f"must be in [1, nesterov_iterations], got {self.nesterov_stages}")
-        _check(self.smoothing_tv > 0, "smoothing_tv", f"must be > 0, got {self.smoothing_tv}")
-        _check(self.smoothing_data > 0, "smoothing_data",
-               f"must be > 0, got {self.smoothing_data}")
-        _check(self.combined_solver in ("nesterov", "primal-dual"), "combined_solver",
-               f"must be 'nesterov' or 'primal-dual', got {self.combined_solver!r}")
-        _check(self.combined_coupling > 0, "combined_coupling",
-               f"must be > 0, got {self.combined_coupling}")
-        _check(self.combined_iterations >= 1, "combined_iterations",
-               f"must be >= 1, got {self.combined_iterations}")
-        _check(self.combined_tolerance >= 0, "combined_tolerance",
-               f"must be >= 0, got {self.combined_tolerance}")
-
-    def sparse_active(self, shape: tuple[int, int]) -> bool:
-        """Whether a level of size ``shape`` runs the sparse stage."""
-        return self.sparse_warps > 0 and min(shape) >= self.sparse_min_size
-
-    def level_warps(self, shape: tuple[int, int]) -> int:
-        """TV-only warps, plus the sparse warps on levels large enough for patches."""
-        return self.n_warps + (self.sparse_warps if self.sparse_active(shape) else 0)
+SparseFields = SparseTerm  # the former mixin's name
+SparseParams = deprecated_preset("SparseParams", "sparse-1d")
+SparseDCTParams = deprecated_preset("SparseDCTParams", "sparse-dct")
+Sparse1DParams = deprecated_preset("Sparse1DParams", "sparse-1d")
+Sparse2x1DParams = deprecated_preset("Sparse2x1DParams", "sparse-2x1d")
+Sparse2DParams = deprecated_preset("Sparse2DParams", "sparse-2d")
+TVL1SparseParams = deprecated_preset("TVL1SparseParams", "tvl1-sparse-1d")
+TVL1SparseDCTParams = deprecated_preset("TVL1SparseDCTParams", "tvl1-sparse-dct")
+TVL1Sparse1DParams = deprecated_preset("TVL1Sparse1DParams", "tvl1-sparse-1d")
+TVL1Sparse2x1DParams = deprecated_preset("TVL1Sparse2x1DParams", "tvl1-sparse-2x1d")
+TVL1Sparse2DParams = deprecated_preset("TVL1Sparse2DParams", "tvl1-sparse-2d")
 
 
-@dataclass(frozen=True)
-class SparseParams(SparseFields, PlainTVL1Params):
-    """Parameters of sparse-regularised TV-L1 on the book's plain energy (``sparse-*``).
-
-    The fields of :class:`~varflow.twoframe.tvl1.PlainTVL1Params` and of
-    :class:`SparseFields` (the tensor fields included).
+@dataclass
+class SparseState(TVL1State):
+    """TV-L1's per-level state and the sparse term's.
 
     Attributes
     ----------
-    edge_weight : float
-        c of the TV edge weight g(x) = exp(-c |∇I0|²), as in TV-L1.  Default 50.
+    dictionaries : list of ndarray or None
+        The level's dictionaries (learned on its first sparse warp).
+    coverage : ndarray, shape (h, w), float32, or None
+        The sparse term's per-pixel weight (:func:`coverage_weight`).
     """
 
-    edge_weight: float = 50.0
+    dictionaries: list | None = None
+    coverage: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class SparseDCTParams(SparseParams):
-    """Sparse TV-L1 with the fixed overcomplete DCT (``dictionary="dct"``)."""
-
-    dictionary: str = "dct"
-
-
-@dataclass(frozen=True)
-class Sparse1DParams(SparseParams):
-    """Sparse TV-L1, MOD-learned "1D" dictionary (one for u and v patches)."""
-
-    layout: str = "1D"
-
-
-@dataclass(frozen=True)
-class Sparse2x1DParams(SparseParams):
-    """Sparse TV-L1, MOD-learned "2x1D" dictionaries (one for u, one for v)."""
-
-    layout: str = "2x1D"
-
-
-@dataclass(frozen=True)
-class Sparse2DParams(SparseParams):
-    """Sparse TV-L1, MOD-learned "2D" dictionary (joint [u; v] patches)."""
-
-    layout: str = "2D"
-    n_atoms: int = 400
-
-
-@dataclass(frozen=True)
-class TVL1SparseParams(SparseFields, TVL1Params):
-    """Sparse-regularised TV-L1 on ``tvl1``'s energy (``tvl1-sparse-*``).
-
-    The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` (grey channel,
-    gradient constancy, Huber-TV, noise rule, weighted median, sharpness match, with
-    their defaults) and of :class:`SparseFields`.  The sparse warps minimise the same
-    data term (the colour and the gradient-constancy channels) and the Huber-TV
-    (smoothed with μ_TV: the Huber function of ε_H + μ_TV for Nesterov's method,
-    exact for the primal-dual scheme); the weighted median follows the last sparse
-    warp of a level.  With ``sparse_weight = 0`` and the primal-dual solver the
-    sparse warps are more ``tvl1`` warps.
-
-    Attributes
-    ----------
-    tensor_a : float
-        a of g(s) = exp(-a s^b) of the tensor-directed TV (``regulariser="tensor"``),
-        as ``tvl1-tensor``'s (:class:`~varflow.twoframe.tensor.TVL1TensorParams`,
-        tuned on the photographic tuning split).  Default 0.5.
-    """
-
-    tensor_a: float = FULL_ENERGY_TENSOR_A
-
-
-@dataclass(frozen=True)
-class TVL1SparseDCTParams(TVL1SparseParams):
-    """Sparse TV-L1 on ``tvl1``'s energy, fixed overcomplete DCT (``dictionary="dct"``)."""
-
-    dictionary: str = "dct"
-
-
-@dataclass(frozen=True)
-class TVL1Sparse1DParams(TVL1SparseParams):
-    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "1D" dictionary."""
-
-    layout: str = "1D"
-
-
-@dataclass(frozen=True)
-class TVL1Sparse2x1DParams(TVL1SparseParams):
-    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "2x1D" dictionaries."""
-
-    layout: str = "2x1D"
-
-
-@dataclass(frozen=True)
-class TVL1Sparse2DParams(TVL1SparseParams):
-    """Sparse TV-L1 on ``tvl1``'s energy, MOD-learned "2D" dictionary."""
-
-    layout: str = "2D"
+def _term(params: SparseTerm | TVL1Params) -> SparseTerm:
+    """The sparse term of ``params`` (an energy with one, or the term itself)."""
+    return params.sparse if isinstance(params, TVL1Params) else params
 
 
 # --------------------------------------------------------------------- dictionaries
@@ -417,7 +171,7 @@ def _dct(layout: str, patch_size: int, n_atoms: int) -> tuple[np.ndarray, ...]:
     return tuple(dicts)
 
 
-def _grid(shape: tuple[int, int], params: SparseFields) -> PatchGrid:
+def _grid(shape: tuple[int, int], params: SparseTerm) -> PatchGrid:
     return PatchGrid(shape[0], shape[1], (params.patch_size, params.patch_size),
                      params.patch_offset)
 
@@ -429,14 +183,15 @@ def _problems(flow: np.ndarray, grid: PatchGrid, layout: str):
 
 
 def learn_dictionaries(
-    flow: np.ndarray, params: SparseFields, init: list[np.ndarray] | None = None
+    flow: np.ndarray, params: SparseTerm | TVL1Params, init: list[np.ndarray] | None = None
 ) -> list[np.ndarray]:
     """Learn (or refresh) the dictionaries of ``params.layout`` from a flow by MOD.
 
     Parameters
     ----------
     flow : ndarray, shape (H, W, 2), float32
-    params : SparseFields
+    params : SparseTerm or TVL1Params
+        The sparse term (or an energy that has one).
     init : list of ndarray, optional
         Starting dictionaries (the coarser level's); the overcomplete DCT if absent.
 
@@ -446,6 +201,7 @@ def learn_dictionaries(
         One ``(dim, n_atoms)`` float32 dictionary per problem of the layout (1 for
         "1D" and "2D", 2 for "2x1D").
     """
+    params = _term(params)
     start = list(init) if init is not None else list(_dct(params.layout, params.patch_size,
                                                           params.n_atoms))
     grid = _grid(flow.shape[:2], params)
@@ -465,7 +221,7 @@ def learn_dictionaries(
 
 
 def sparse_approximation(
-    flow: np.ndarray, dictionaries: list[np.ndarray], params: SparseFields
+    flow: np.ndarray, dictionaries: list[np.ndarray], params: SparseTerm | TVL1Params
 ) -> np.ndarray:
     """``ū``: the average of the overlapping OMP approximations of the flow's patches.
 
@@ -474,12 +230,14 @@ def sparse_approximation(
     flow : ndarray, shape (H, W, 2), float32
     dictionaries : list of ndarray
         As returned by :func:`learn_dictionaries` (or the DCT of the layout).
-    params : SparseFields
+    params : SparseTerm or TVL1Params
+        The sparse term (or an energy that has one).
 
     Returns
     -------
     ndarray, shape (H, W, 2), float32
     """
+    params = _term(params)
     grid = _grid(flow.shape[:2], params)
     parts = []
     for (y, m), d in zip(_problems(flow, grid, params.layout), dictionaries, strict=True):
@@ -490,8 +248,9 @@ def sparse_approximation(
     return np.ascontiguousarray(approx, dtype=np.float32)
 
 
-def coverage_weight(shape: tuple[int, int], params: SparseFields) -> np.ndarray:
+def coverage_weight(shape: tuple[int, int], params: SparseTerm | TVL1Params) -> np.ndarray:
     """Patch coverage ``c(x)`` normalised by its mean ``m n / k²``, shape (H, W)."""
+    params = _term(params)
     grid = _grid(shape, params)
     density = params.patch_size**2 / params.patch_offset**2
     return (grid.count / np.float32(density)).astype(np.float32)
@@ -852,8 +611,8 @@ def sparse_pd_iterations_numpy(ix, iy, a, g, tens, u, p, tp, q, ubar, wsp, lam, 
 # --------------------------------------------------------------------- the solver
 
 
-def _init_level(I0, params: SparseFields, state: LevelState) -> None:
-    if params.regulariser == "tensor":
+def _init_level(I0, params: TVL1Params, state: TVL1State) -> None:
+    if params.sparse.regulariser == "tensor":
         init_tensor_level(I0, params, state)
     else:
         init_level_state(state, I0.shape, edge_weight(I0, params.edge_weight,
@@ -861,71 +620,75 @@ def _init_level(I0, params: SparseFields, state: LevelState) -> None:
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: SparseFields, state: LevelState,
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: LevelState,
     engine: str = "numba",
 ):
     """Single-level, single-warp solver of sparse-regularised TV-L1 (driver plug-in).
 
     Warps ``0 … n_warps-1`` of a level run TV-L1 (isotropic or tensor); on levels
-    where :meth:`SparseFields.sparse_active` holds, the following ``sparse_warps``
-    learn the dictionaries (first sparse warp), code the current flow and minimise
-    the combined energy with Nesterov's method or the primal-dual scheme
-    (``params.combined_solver``).  Arguments as in
+    where :meth:`~varflow.twoframe.params.TVL1Params.sparse_active` holds, the
+    following ``sparse_warps`` learn the dictionaries (first sparse warp), code the
+    current flow and minimise the combined energy with Nesterov's method or the
+    primal-dual scheme (``combined_solver``).  ``params.sparse`` is the
+    :class:`~varflow.twoframe.params.SparseTerm`; the solver keeps a
+    :class:`SparseState` in ``state.data``.  Arguments as in
     :func:`varflow.twoframe.tvl1.solve_warp`.
 
     Returns
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if state.g is None:
-        _init_level(I0, params, state)
+    st = level_state(state, SparseState)
+    sp = params.sparse
+    if st.g is None:
+        _init_level(I0, params, st)
     if state.warp < params.n_warps or not params.sparse_active(I0.shape[:2]):
-        return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
+        return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st, engine)
 
     stats = state.stats
     t0 = time.perf_counter()
-    if state.dictionaries is None:
-        prev = None if state.previous is None else state.previous.dictionaries
-        if params.dictionary == "dct":
-            state.dictionaries = list(_dct(params.layout, params.patch_size, params.n_atoms))
+    if st.dictionaries is None:
+        prev = None if st.previous is None else st.previous.dictionaries
+        if sp.dictionary == "dct":
+            st.dictionaries = list(_dct(sp.layout, sp.patch_size, sp.n_atoms))
         else:
-            state.dictionaries = learn_dictionaries(flow0, params, prev)
-        state.coverage = coverage_weight(I0.shape[:2], params)
-    ubar = sparse_approximation(flow0, state.dictionaries, params)
+            st.dictionaries = learn_dictionaries(flow0, sp, prev)
+        st.coverage = coverage_weight(I0.shape[:2], sp)
+    ubar = sparse_approximation(flow0, st.dictionaries, sp)
     t1 = time.perf_counter()
 
-    lam_sp = params.sparse_weight * params.sparse_weight_decay ** state.level
+    lam_sp = sp.sparse_weight * sp.sparse_weight_decay ** st.level
     if engine not in ("numba", "numpy"):
         raise ValueError(f"engine: must be 'numba' or 'numpy', got {engine!r}")
     # every channel of the energy's data term (the gradient constancy too), weights folded in
-    ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state)
+    ix, iy, a = data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st)
     u = planar(flow0, copy=True)
-    tens, aniso = kernel_tensor(state)
-    wsp = (np.float32(lam_sp) * state.coverage).astype(np.float32)
-    if params.combined_solver == "primal-dual":
+    tens, aniso = kernel_tensor(st)
+    wsp = (np.float32(lam_sp) * st.coverage).astype(np.float32)
+    if sp.combined_solver == "primal-dual":
         args = (
-            ix, iy, a, state.g, tens, u, state.p, state.tp,
-            data_duals(state, ix.shape[0]), planar(ubar),
-            wsp, np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
-            np.float32(params.combined_coupling), np.float32(params.tv_step),
-            params.combined_iterations, np.float32(params.combined_tolerance),
+            ix, iy, a, st.g, tens, u, st.p, st.tp,
+            data_duals(st, ix.shape[0]), planar(ubar),
+            wsp, np.float32(params.data_weight), np.float32(sp.sparse_tv_weight),
+            np.float32(sp.combined_coupling), np.float32(params.tv_step),
+            sp.combined_iterations, np.float32(sp.combined_tolerance),
             params.data_sweeps, aniso,
         )
         if engine == "numba":
             n = sparse_pd_iterations(*args, row_blocks(I0.shape[0]), np.float32(params.huber))
         else:
             n = sparse_pd_iterations_numpy(*args, None, params.huber)
-        state.iterations += n
+        st.iterations += n
     else:
-        stages = params.nesterov_stages
+        stages = sp.nesterov_stages
         # Huber-TV (ε_H) smoothed with μ_TV is the Huber function of ε_H + μ_TV
         # (Moreau envelopes add their parameters)
         args = (
-            ix, iy, a, state.g, tens, aniso, planar(ubar), wsp, u,
-            np.float32(params.data_weight), np.float32(params.sparse_tv_weight),
-            _continuation(params.smoothing_tv + params.huber, stages),
-            _continuation(params.smoothing_data, stages),
-            max(1, params.nesterov_iterations // stages),
+            ix, iy, a, st.g, tens, aniso, planar(ubar), wsp, u,
+            np.float32(params.data_weight), np.float32(sp.sparse_tv_weight),
+            _continuation(sp.smoothing_tv + params.huber, stages),
+            _continuation(sp.smoothing_data, stages),
+            max(1, sp.nesterov_iterations // stages),
         )
         if engine == "numba":
             nesterov_iterations(*args, row_blocks(I0.shape[0]))

@@ -25,16 +25,16 @@ Symbol map: a = ``tensor_a``, b = ``tensor_b``, σ = ``tensor_sigma``; the rest 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import ndimage
 
 from ..ops.differences import image_derivatives
-from .coarse_to_fine import LevelState, _check
-from .tvl1 import PlainTVL1Params, TVL1Params, edge_weight, init_level_state, run_warp
+from .coarse_to_fine import LevelState
+from .params import FULL_ENERGY_TENSOR_A, TensorTerm, TVL1Params, deprecated_preset
+from .tvl1 import TVL1State, edge_weight, init_level_state, level_state, run_warp
 
 __all__ = [
+    "TensorTerm",
     "TensorFields",
     "TensorParams",
     "TVL1TensorParams",
@@ -45,87 +45,9 @@ __all__ = [
 ]
 
 
-#: a of the tensor on ``tvl1``'s energy (:class:`TVL1TensorParams`, and the
-#: ``tvl1-sparse-*`` methods' tensor regulariser): tuned on the photographic tuning split.
-FULL_ENERGY_TENSOR_A = 0.5
-
-
-@dataclass(frozen=True)
-class TensorFields:
-    """The fields of the tensor-directed regulariser, to compose onto a TV-L1 energy.
-
-    A mixin: put it before a :class:`~varflow.twoframe.tvl1.TVL1Params` subclass in
-    the bases (``class P(TensorFields, TVL1Params)``); its checks run after those
-    of the energy.  :class:`TensorParams` composes it with the book's plain energy,
-    :class:`TVL1TensorParams` with ``tvl1``'s.
-
-    Attributes
-    ----------
-    tensor_a : float
-        a of g(s) = exp(-a s^b), the weight across edges (``s = |∇I|`` in intensity/pixel,
-        images in [0, 1]); 0 gives D = identity (isotropic TV).  Default 3.
-    tensor_b : float
-        b of g(s) = exp(-a s^b), > 0.  Default 0.5.
-    tensor_sigma : float
-        σ of the Gaussian that smooths the structure tensor, pixels; 0 uses the
-        gradient itself.  Default 1.
-    """
-
-    tensor_a: float = 3.0
-    tensor_b: float = 0.5
-    tensor_sigma: float = 1.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()  # the energy's checks (the next class in the MRO)
-        _check(self.tensor_a >= 0, "tensor_a", f"must be >= 0, got {self.tensor_a}")
-        _check(self.tensor_b > 0, "tensor_b", f"must be > 0, got {self.tensor_b}")
-        _check(self.tensor_sigma >= 0, "tensor_sigma", f"must be >= 0, got {self.tensor_sigma}")
-
-
-@dataclass(frozen=True)
-class TensorParams(TensorFields, PlainTVL1Params):
-    """Parameters of tensor-directed TV-L1 on the book's plain energy (method ``tensor``).
-
-    The fields of :class:`~varflow.twoframe.tvl1.PlainTVL1Params` and of
-    :class:`TensorFields`.
-
-    Attributes
-    ----------
-    edge_weight : float
-        c of the isotropic edge weight ``exp(-c |∇I0|²)`` (the radius of the dual ball);
-        the tensor already carries the edge information, so it is off here.  Default 0.
-    """
-
-    edge_weight: float = 0.0
-
-
-@dataclass(frozen=True)
-class TVL1TensorParams(TensorFields, TVL1Params):
-    """Tensor-directed TV-L1 on ``tvl1``'s energy (method ``tvl1-tensor``).
-
-    The fields of :class:`~varflow.twoframe.tvl1.TVL1Params` (grey channel,
-    gradient constancy, Huber-TV, noise rule, weighted median, sharpness match, with
-    their defaults) and of :class:`TensorFields`; the tensor replaces the isotropic
-    TV of every warp.  With ``tensor_a = 0`` it is ``tvl1`` with the same
-    ``edge_weight``.
-
-    Attributes
-    ----------
-    edge_weight : float
-        c of the isotropic edge weight ``exp(-c |∇I0|²)`` beside the tensor (the radius of
-        the dual ball); 0 leaves the edges to the tensor alone.  Default 0 (better
-        than 30 at every a on the photographic tuning split).
-    tensor_a : float
-        a of g(s) = exp(-a s^b), the weight across edges (``s = |∇I|`` in intensity/pixel,
-        images in [0, 1]); 0 gives D = identity (isotropic TV).  Default 0.5: on the
-        photographic tuning split (21 pairs) mean AEE 0.076 / 0.076 / 0.077 / 0.078 /
-        0.080 / 0.085 for a = 0 / 0.25 / 0.5 / 1 / 1.5 / 3 (edge weight 0; tvl1
-        0.080), the largest a within 0.001 of the best (benchmarks/README.md, issue
-        27 part 6); the plain energy's 3 costs 0.009 here.
-    """
-
-    edge_weight: float = 0.0
-    tensor_a: float = FULL_ENERGY_TENSOR_A
+TensorFields = TensorTerm  # the former mixin's name
+TensorParams = deprecated_preset("TensorParams", "tensor")
+TVL1TensorParams = deprecated_preset("TVL1TensorParams", "tvl1-tensor")
 
 
 def diffusion_tensor(
@@ -185,30 +107,32 @@ def diffusion_tensor(
     return out
 
 
-def init_tensor_level(I0: np.ndarray, params: TensorFields, state: LevelState) -> None:
+def init_tensor_level(I0: np.ndarray, params: TVL1Params, state: TVL1State) -> None:
     """Per-level state of tensor-directed TV-L1: edge weight, tensor ``D`` and duals.
 
-    ``params`` is any TV-L1 parameter class with the :class:`TensorFields`.
+    ``params`` is a TV-L1 energy with a :class:`~varflow.twoframe.params.TensorTerm`.
     """
     g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
-    tens = diffusion_tensor(I0, params.tensor_a, params.tensor_b, params.tensor_sigma,
-                            params.edge_weight_min)
+    t = params.tensor
+    tens = diffusion_tensor(I0, t.tensor_a, t.tensor_b, t.tensor_sigma, params.edge_weight_min)
     init_level_state(state, I0.shape, g, tens)
 
 
 def solve_warp(
-    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TensorFields, state: LevelState,
+    I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: LevelState,
     engine: str = "numba",
 ):
     """Single-level, single-warp tensor-directed TV-L1 solver (plug-in to the driver).
 
-    Arguments as in :func:`varflow.twoframe.tvl1.solve_warp`; the tensor is computed
-    from ``I0`` once per level and kept in ``state.tensor``.
+    Arguments as in :func:`varflow.twoframe.tvl1.solve_warp`; ``params.tensor`` is the
+    :class:`~varflow.twoframe.params.TensorTerm`.  The tensor is computed from ``I0``
+    once per level and kept in the solver's state (``state.data.tensor``).
 
     Returns
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if state.g is None:
-        init_tensor_level(I0, params, state)
-    return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
+    st = level_state(state)
+    if st.g is None:
+        init_tensor_level(I0, params, st)
+    return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st, engine)

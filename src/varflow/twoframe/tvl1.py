@@ -43,8 +43,8 @@ Symbol map: λ = ``data_weight``, θ = ``coupling``, τ = ``tv_step``,
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -59,7 +59,6 @@ from ..ops.differences import (
     stencil5,
     stencil5_indices,
 )
-from ..ops.fusion import noise_sigma_flat
 from ..ops.primal_dual import (
     F0,
     F1,
@@ -72,10 +71,13 @@ from ..ops.primal_dual import (
 )
 from ..ops.prox import prox_huber_conjugate, prox_linear_l1
 from ..ops.pyramid import resize_bilinear, smooth_image, smooth_planes
-from .coarse_to_fine import CoarseToFineParams, LevelState, _check, coarse_to_fine
+from .coarse_to_fine import LevelState, coarse_to_fine
+from .params import PRESETS, TVL1Params, deprecated_preset
 
 __all__ = [
     "TVL1Params",
+    "TVL1State",
+    "level_state",
     "PlainTVL1Params",
     "TVL1FastParams",
     "solve_warp",
@@ -89,211 +91,58 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class TVL1Params(CoarseToFineParams):
-    """Parameters of TV-L1 (all pyramid fields of :class:`CoarseToFineParams` too).
+@dataclass
+class TVL1State:
+    """What the TV-L1 solvers keep for one pyramid level (owned by the solver).
 
-    Intensities are in [0, 1]; flows in pixels.  The defaults are those of the
-    ``tvl1`` method (issue 11): the grey channel mean, a brightness-constancy term of
-    weight λ = 15 beside a gradient-constancy term of weight γ = 140, Huber-TV, texture α =
-    0.3, the sharpness match and the noise rule, chosen on the photographic tuning
-    split and Middlebury (benchmarks/README.md).  The methods built on the book's
-    plain energy (colour term and TV only) start from :class:`PlainTVL1Params`.
+    Created on a level's first warp (:func:`level_state`) and updated in place; the
+    driver holds it in ``LevelState.data`` and knows nothing of its fields.
 
     Attributes
     ----------
-    data_weight : float
-        λ, weight of the L1 data term per channel (1/intensity units).  Default 15
-        (with γ = 140 on the grey channel; the plain energy's 40 was tuned on
-        Middlebury alone).
-    coupling : float
-        θ, coupling between the data and TV sub-problems (pixels²·…); small values
-        tie u and v closely.  Default 0.3.
-    tv_step : float
-        τ, step of the dual TV update; stable for τ ≤ 1/4.  Default 0.25.
-    max_iterations : int
-        Maximum iterations per warp.  Default 24 (the last 20 of 50 barely move
-        the flow; with the weighted median 24 are as accurate as 30, 20 lose
-        0.001 on the tuning split; benchmarks/README.md, session 8).
-    tolerance : float
-        ε, stop when the root-mean-square update of the flow is below ε pixels
-        (tested after every second iteration).  Default 0.01.
-    edge_weight : float
-        c of the TV edge weight ``g(x) = exp(-c |∇I0|²)`` (``|∇I0|²`` in intensity²/pixel²,
-        averaged over channels, of the pre-processed frame); 0 gives g ≡ 1 (plain TV).
-        Default 30 (tuning split and Middlebury; 50 for the plain energy).
-    edge_weight_min : float
-        Lower bound of g, in (0, 1].  Default 0.05.
-    data_sweeps : int
-        Coordinate-descent sweeps of the colour data prox per iteration (warm
-        started across iterations; grey images are exact with 1).  Default 1 (2 gave
-        the same Middlebury AEE to 1e-3 at 1.3x the cost).
-    gradient_weight : float
-        γ, weight of the L1 gradient-constancy term ``γ Σ_c |ρ_cx| + |ρ_cy|``, the
-        linearised constancy of ∂_x I_c and ∂_y I_c for every colour channel of the
-        pre-processed frames (Brox et al. 2004; 1/(intensity/pixel) units), added to
-        the colour term of weight λ.  Blind to additive brightness changes, which
-        make the colour term drift on the coarse levels.  0 turns it off.
-        Default 140 (with λ = 15 on the grey channel; tuning split and Middlebury).
-    gradient_sigma : float
-        σ_g of the Gaussian pre-smoothing of the frames whose gradients enter the
-        gradient-constancy term, in pixels of the finest level (σ_g η^l at level
-        l, so it follows the pyramid); 0 for none.  Read only when γ > 0.
-        Default 1.0 (tuned: halves the noise and blur AEE of σ_g = 0).
-    data_normalisation : float
-        ζ of the data-term normalisation of Zimmer et al. (2011): every linearised
-        constraint (colour and gradient) is divided by ``sqrt(|∇ρ|² + ζ²)``, the
-        norm of its own spatial gradient (intensity/pixel units), so that it
-        measures a distance in pixels to its constraint line; λ and γ then weigh
-        pixels, not intensities (retune them: the scale of the data term grows by
-        up to 1/ζ).  0 turns it off.  Default 0.
-    huber : float
-        ε_H of Huber-TV (Werlberger et al. 2009), in flow-gradient units (pixels per
-        pixel): the regulariser is quadratic, ``g |∇u_k|²/(2ε_H)``, below ε_H and TV
-        above, so smooth (affine, non-rigid) motion does not staircase.  0 gives TV.
-        Default 0.02 (larger values let noise into the flow).
-    gradient_grey : bool
-        Put the gradient-constancy term on the mean of the colour channels: one x
-        and one y channel weighted ``C γ`` (so that γ keeps its meaning) instead of
-        ``2 C`` channels; on Middlebury 0.89× the time, 0.269 against 0.266 AEE
-        (benchmarks/README.md).  Read only when γ > 0.  Default False.
-    noise_reference : float
-        σ_0 of the noise rule, intensity units: on frames whose noise σ̂ exceeds it
-        the data weights λ and γ are multiplied by σ_0/σ̂ (a stronger
-        regulariser where the data are noisier); σ̂ is the mean over the two frames
-        of :func:`varflow.ops.fusion.noise_sigma_flat` (Immerkær's estimator on the
-        flattest tiles), read on the channels the method works on (the grey mean
-        with ``grey``) before any other pre-processing.  0 turns it off.
-        Default 0.01.
-    texture_alpha : float
-        α of the structure-texture blend ``I - α ROF(I)``, in [0, 1].  Default 0.3
-        (0.65 for the plain energy: Middlebury wants more of the image once the
-        gradient term carries the shading-invariant part).
-    sharpness_match : bool
-        Blur the sharper frame by a Gaussian until both frames are equally sharp
-        when they differ (one frame motion-blurred or out of focus; see
-        :class:`CoarseToFineParams`).  Default True.
-    grey : bool
-        Work on the mean of the colour channels (as DeepFlow does): a third of the
-        data-term work of one residual per channel.  On Middlebury the grey channel
-        with λ = 15, γ = 120 gave 0.270 against 0.266 for the colour channels with
-        λ = 5, γ = 40 (the same weights per pixel), in half the time.  Default True.
-    weighted_median_radius : int
-        r of the weighted median near motion boundaries after each level's last
-        warp (see :class:`CoarseToFineParams`, which also holds σ_s, σ_c, σ_d and
-        the edge threshold).  Default 3 (7 × 7 windows; tuning split and
-        Middlebury, sessions 7-8 in benchmarks/README.md); 0 leaves the plain
-        median alone.
-    weighted_median_levels : int
-        The weighted median on the finest 3 levels only (see
-        :class:`CoarseToFineParams`): 0.6 of its cost on the large-motion Sintel
-        pairs, for Middlebury 0.254 → 0.257.  Default 3.
-    n_warps : int
-        Number of warps (re-linearisations) per level.  Default 4: with the
-        weighted median, 4 warps are as accurate as 5 on the tuning split and
-        Middlebury, at 0.8 times the work.
+    level : int
+        Pyramid level, 0 = finest (the gradient term's σ_g follows it).
+    previous : TVL1State or None
+        The coarser level's state (its own ``previous`` dropped), for warm starts.
+    iterations : int
+        Primal-dual iterations run at this level so far.
+    g : ndarray, shape (h, w), float32, or None
+        Radius of the TV dual ball: the edge weight g(x).
+    tensor : ndarray, shape (3, h, w), float32, or None
+        ``T = D^{1/2}`` as (T11, T12, T22) of tensor-directed TV; None: isotropic.
+    p, tp : ndarray, shape (4, h, w), float32, or None
+        TV dual variables (p1x, p1y, p2x, p2y) and ``T p`` (``tp is p`` when isotropic).
+    q : ndarray, shape (C, h, w), float32, or None
+        Dual variables of the data prox's colour channels (warm started across warps).
+    q_all : ndarray, shape (K, h, w), float32, or None
+        The data prox's duals of every channel when the data term has more than the
+        colour channels (``q`` is then a view of its first planes).
+    grad0 : ndarray or tuple or None
+        The smoothed derivatives of the first frame for gradient constancy
+        (:func:`data_channels`).
     """
 
-    data_weight: float = 15.0
-    coupling: float = 0.3
-    tv_step: float = 0.25
-    max_iterations: int = 24
-    tolerance: float = 0.01
-    edge_weight: float = 30.0
-    edge_weight_min: float = 0.05
-    data_sweeps: int = 1
-    gradient_weight: float = 140.0
-    gradient_sigma: float = 1.0
-    data_normalisation: float = 0.0
-    huber: float = 0.02
-    gradient_grey: bool = False
-    noise_reference: float = 0.01
-    texture_alpha: float = 0.3
-    sharpness_match: bool = True
-    grey: bool = True
-    weighted_median_radius: int = 3
-    weighted_median_levels: int = 3
-    n_warps: int = 4
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _check(self.data_weight > 0, "data_weight", f"must be > 0, got {self.data_weight}")
-        _check(self.coupling > 0, "coupling", f"must be > 0, got {self.coupling}")
-        _check(0 < self.tv_step <= 0.25, "tv_step", f"must be in (0, 0.25], got {self.tv_step}")
-        _check(
-            self.max_iterations >= 1, "max_iterations", f"must be >= 1, got {self.max_iterations}"
-        )
-        _check(self.tolerance >= 0, "tolerance", f"must be >= 0, got {self.tolerance}")
-        _check(self.edge_weight >= 0, "edge_weight", f"must be >= 0, got {self.edge_weight}")
-        _check(
-            0 < self.edge_weight_min <= 1,
-            "edge_weight_min",
-            f"must be in (0, 1], got {self.edge_weight_min}",
-        )
-        _check(self.data_sweeps >= 1, "data_sweeps", f"must be >= 1, got {self.data_sweeps}")
-        for name in ("gradient_weight", "gradient_sigma", "data_normalisation", "huber",
-                     "noise_reference"):
-            value = getattr(self, name)
-            _check(math.isfinite(value) and value >= 0, name,
-                   f"must be a finite number >= 0, got {value}")
-
-    def for_frames(self, I0: np.ndarray, I1: np.ndarray, stats: dict) -> TVL1Params:
-        """Apply the noise rule (``noise_reference``) to a pair of ``(H, W, C)`` frames.
-
-        Records ``noise_sigma`` (σ̂) and ``data_scale`` (the factor on λ and γ) in
-        ``stats`` when the rule is on.
-        """
-        if self.noise_reference <= 0:
-            return self
-        sigma = 0.5 * (noise_sigma_flat(I0) + noise_sigma_flat(I1))
-        scale = min(1.0, self.noise_reference / sigma) if sigma > 0 else 1.0
-        stats.update(noise_sigma=sigma, data_scale=scale)
-        if scale == 1.0:
-            return self
-        return self.replace(data_weight=self.data_weight * scale,
-                            gradient_weight=self.gradient_weight * scale)
+    level: int = 0
+    previous: TVL1State | None = None
+    iterations: int = 0
+    g: np.ndarray | None = None
+    tensor: np.ndarray | None = None
+    p: np.ndarray | None = None
+    tp: np.ndarray | None = None
+    q: np.ndarray | None = None
+    q_all: np.ndarray | None = None
+    grad0: Any = None
 
 
-@dataclass(frozen=True)
-class PlainTVL1Params(TVL1Params):
-    """TV-L1 with the book's plain energy: one L1 residual per colour channel and TV.
-
-    The defaults of ``tvl1`` before issue 11 (λ = 40, edge weight c = 50, texture
-    α = 0.65, at most 50 iterations, no gradient term, no Huber-TV, no sharpness
-    match, no noise rule, colour channels, no weighted median, 5 warps per level),
-    tuned on Middlebury.  The methods built
-    on that energy, whose tables were measured with it, start from here: the
-    tensor-directed and sparse methods, the trackers and RLR/MFSF (RLR adds the
-    weighted median back).  Every field is that of :class:`TVL1Params`.
-    """
-
-    data_weight: float = 40.0
-    max_iterations: int = 50
-    edge_weight: float = 50.0
-    gradient_weight: float = 0.0
-    huber: float = 0.0
-    noise_reference: float = 0.0
-    texture_alpha: float = 0.65
-    sharpness_match: bool = False
-    grey: bool = False
-    weighted_median_radius: int = 0
-    weighted_median_levels: int = 0
-    n_warps: int = 5
-
-
-@dataclass(frozen=True)
-class TVL1FastParams(TVL1Params):
-    """The ``tvl1-fast`` preset: TV-L1 for previews, same model, less work.
-
-    Fewer and coarser pyramid levels (η = ``scale_factor`` 0.5: the levels below
-    the finest add a third of its area instead of 1.8 times), ``n_warps`` 3 warps
-    per level.  Every other field is that of :class:`TVL1Params` (the same
-    model: grey channel, gradient term, Huber-TV).  Accuracy and speed beside
-    ``tvl1`` and the OpenCV peers: benchmarks/README.md.
-    """
-
-    scale_factor: float = 0.5
-    n_warps: int = 3
+def level_state(state: LevelState, kind: type[TVL1State] = TVL1State) -> TVL1State:
+    """The solver's state of the driver's level ``state``: ``state.data``, created as a
+    ``kind`` (linked to the coarser level's, whose own link is dropped) if unset."""
+    if state.data is None:
+        prev = None if state.previous is None else state.previous.data
+        if prev is not None:
+            prev.previous = None  # keep one level of history
+        state.data = kind(level=state.level, previous=prev)
+    return state.data
 
 
 def edge_weight(image: np.ndarray, c: float, g_min: float = 0.05) -> np.ndarray:
@@ -456,7 +305,7 @@ def tvl1_iterations_numpy(
 
 
 def init_level_state(
-    state: LevelState, shape: tuple[int, int, int], g: np.ndarray,
+    state: TVL1State, shape: tuple[int, int, int], g: np.ndarray,
     tensor: np.ndarray | None = None,
 ) -> None:
     """Set up the per-level state of the primal-dual iterations (first warp of a level).
@@ -466,8 +315,8 @@ def init_level_state(
 
     Parameters
     ----------
-    state : LevelState
-        The driver's per-level state; sets ``g``, ``tensor``, ``p``, ``tp`` and ``q``.
+    state : TVL1State
+        The level's solver state; sets ``g``, ``tensor``, ``p``, ``tp`` and ``q``.
     shape : (H, W, C)
     g : ndarray, shape (H, W), float32
         Radius of the dual ball (edge weight).
@@ -581,7 +430,7 @@ def robust_data_term(params: TVL1Params) -> bool:
 
 
 def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
-                  state: LevelState):
+                  state: TVL1State):
     """All channels of the linearised data term of one warp, weights folded in.
 
     The colour channels of :func:`linearise`, then (γ > 0) two gradient-constancy
@@ -669,7 +518,7 @@ def _gradient_inputs(dx, dy, params: TVL1Params):
     return grey[0], grey[1], np.float32(w_grad * nc)
 
 
-def _reference_gradients(I0, params: TVL1Params, state: LevelState, engine: str = "numba"):
+def _reference_gradients(I0, params: TVL1Params, state: TVL1State, engine: str = "numba"):
     """``(σ, J0)`` of the level: the smoothed first-frame derivatives, cached in ``state``.
 
     Built by the very operations that give the second frame's side in
@@ -785,7 +634,7 @@ def _gradient_channels_kernel(j1, i0, inside, flow0, wg, k0, ix, iy, a):
 
 
 def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
-                        state: LevelState):
+                        state: TVL1State):
     """Reference NumPy implementation of :func:`data_channels` (same arguments, same
     state cache, same outputs)."""
     ix, iy, a = linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0)
@@ -815,7 +664,7 @@ def data_channels_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Para
             np.ascontiguousarray(a, np.float32))
 
 
-def kernel_tensor(state: LevelState) -> tuple[np.ndarray, bool]:
+def kernel_tensor(state: TVL1State) -> tuple[np.ndarray, bool]:
     """``(tensor, aniso)`` arguments of the kernels from the level state.
 
     The kernels need an array even for isotropic TV: a (3, 1, 1) placeholder that
@@ -825,7 +674,7 @@ def kernel_tensor(state: LevelState) -> tuple[np.ndarray, bool]:
     return (NO_TENSOR, False) if tens is None else (tens, True)
 
 
-def data_duals(state: LevelState, n_channels: int) -> np.ndarray:
+def data_duals(state: TVL1State, n_channels: int) -> np.ndarray:
     """The dual variables ``q`` of the data prox for ``n_channels`` channels of
     :func:`data_channels` (warm started across the warps of a level).
 
@@ -845,7 +694,7 @@ def data_duals(state: LevelState, n_channels: int) -> np.ndarray:
     return q
 
 
-def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: LevelState,
+def run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params, state: TVL1State,
              engine: str = "numba") -> np.ndarray:
     """Run the TV-L1 iterations of one warp on a level prepared by :func:`init_level_state`.
 
@@ -889,17 +738,19 @@ def solve_warp(
         Linearisation point (and initial value).
     params : TVL1Params
     state : LevelState
-        Per-level state: dual variables ``p`` and ``q`` and the edge weight ``g``.
+        The driver's per-level state; the solver keeps its own (:class:`TVL1State`:
+        dual variables ``p`` and ``q``, the edge weight ``g``) in ``state.data``.
     engine : {"numba", "numpy"}
 
     Returns
     -------
     ndarray, shape (H, W, 2), float32
     """
-    if state.g is None:
+    st = level_state(state)
+    if st.g is None:
         g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
-        init_level_state(state, I0.shape, g)
-    return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, state, engine)
+        init_level_state(st, I0.shape, g)
+    return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st, engine)
 
 
 def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callback=None,
@@ -931,6 +782,10 @@ def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callb
     estimation and their principles", CVPR 2010.
     """
     return coarse_to_fine(
-        frame0, frame1, solve_warp, params or TVL1Params(), init_flow=init_flow, callback=callback,
-        levels=levels,
+        frame0, frame1, solve_warp, params or PRESETS["tvl1"], init_flow=init_flow,
+        callback=callback, levels=levels,
     )
+
+
+PlainTVL1Params = deprecated_preset("PlainTVL1Params", "plain")
+TVL1FastParams = deprecated_preset("TVL1FastParams", "fast")
