@@ -150,8 +150,8 @@ __all__ = [
     "track_rlr",
     "adjacent_factor",
     "residual_noise",
-    # Issue 46 split this module by stage; the names that lived here stay importable
-    # from it (varflow itself imports them from their homes): the parameters from
+    # Re-exported so that code importing them from this module keeps working (varflow
+    # itself imports them from their homes): the parameters from
     # varflow.multiframe.params, the refinement from .refine, the fusion from .fuse,
     # the U-step from .ustep, the exact prox from varflow.ops.prox.
     "TVL1_ENERGY",
