@@ -8,11 +8,18 @@ implicit edges to parent packages).  The graph must have no cycle, only
 :mod:`varflow.cli` may import the CLI, :mod:`varflow.io` keeps to readers and
 writers (no argparse, no CLI), and no module imports a private name (``_x``) of
 another package than its own or one of its subpackages.
+
+The docstrings and comments of ``src/varflow`` state the present fact: no issue numbers,
+numbered work sessions, tuning-split figures, varflow version numbers or dates; that
+history lives in ``benchmarks/HISTORY.md``.
 """
 
 from __future__ import annotations
 
 import ast
+import io
+import re
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -172,3 +179,94 @@ def test_the_package_rule_sees_a_planted_crossing() -> None:
 
 def test_the_private_import_checker_sees_a_planted_import() -> None:
     assert [a for _, a, _ in _private_imports("varflow.ops.median")] == ["_exp_neg_row"]
+
+
+#: What a docstring or comment of ``src/varflow`` must not hold: the history of a thing
+#: (benchmarks/HISTORY.md keeps it).  A version number is three dotted numbers not part
+#: of a longer dotted run (so an IP address such as 127.0.0.1 is not one).
+_HISTORY_PATTERNS = {
+    "issue number": re.compile(r"\b[Ii]ssue\s+\d+"),
+    "numbered session": re.compile(r"\b[Ss]essions?\s+\d+"),
+    "tuning-split figure": re.compile(r"\btuning\s+split\b"),
+    "version number": re.compile(r"(?<!\d)(?<!\d\.)\d+\.\d+\.\d+(?!\.?\d)"),
+    "date": re.compile(r"\b20\d\d-\d\d-\d\d\b"),
+}
+
+#: Files under src/varflow skipped by the history scan, relative to src/varflow.
+def _prose(source: str) -> list[tuple[int, str]]:
+    """``(first line, text)`` of every docstring (any bare string statement: module,
+    class, function and attribute docstrings) and every block of comments on
+    consecutive lines of a module's source; other string literals are code."""
+    out = [(node.lineno, node.value.value) for node in ast.walk(ast.parse(source))
+           if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+           and isinstance(node.value.value, str)]
+    block: list[str] = []
+    start = last = 0
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type != tokenize.COMMENT:
+            continue
+        line = tok.start[0]
+        if block and line != last + 1:
+            out.append((start, "\n".join(block)))
+            block = []
+        if not block:
+            start = line
+        block.append(tok.string.lstrip("#:"))
+        last = line
+    if block:
+        out.append((start, "\n".join(block)))
+    return out
+
+
+def _history_hits(source: str) -> list[tuple[int, str, str]]:
+    """``(line, what, matched text)`` of every history pattern in a module's prose."""
+    hits = []
+    for first, text in _prose(source):
+        for what, pattern in _HISTORY_PATTERNS.items():
+            for m in pattern.finditer(text):
+                hits.append((first + text.count("\n", 0, m.start()), what,
+                             " ".join(m.group().split())))
+    return sorted(hits)
+
+
+def _varflow_files() -> dict[str, Path]:
+    """``{path relative to src/varflow: file}`` of every module of varflow."""
+    root = SRC / "varflow"
+    return {path.relative_to(root).as_posix(): path for path in sorted(root.rglob("*.py"))}
+
+
+def test_src_docstrings_hold_no_history() -> None:
+    """Docstrings and comments say what a thing is, its units, its default and why; the
+    issue, session, figures, version and date that led to it belong in
+    benchmarks/HISTORY.md."""
+    bad = [f"src/varflow/{rel}:{line}: {what} {text!r}"
+           for rel, path in _varflow_files().items()
+           for line, what, text in _history_hits(path.read_text(encoding="utf-8"))]
+    assert not bad, "history in docstrings or comments (move it to benchmarks/HISTORY.md):\n" \
+        + "\n".join(bad)
+
+
+def test_the_history_scan_sees_planted_history() -> None:
+    """The scanner itself: history in a docstring, an attribute docstring or a comment
+    block (also across a line break) is found at its line; code, an IP address and a
+    reference number are not."""
+    planted = (
+        '"""Default 3 (issue 27)."""\n'
+        'HOST = "127.0.0.1"  # version 0.7.1, host 127.0.0.1\n'
+        'VERSION = "0.8.0"\n'
+        '#: Measured on the tuning\n'
+        '#: split in session 8.\n'
+        'N = 3\n'
+        '"""Attribute docstring, 2026-12-04; Technion CS-2008-08."""\n'
+        "def f():\n"
+        '    """Ends at 1.2.3."""\n'
+        '    return "issue 5"\n'
+    )
+    assert _history_hits(planted) == [
+        (1, "issue number", "issue 27"),
+        (2, "version number", "0.7.1"),
+        (4, "tuning-split figure", "tuning split"),
+        (5, "numbered session", "session 8"),
+        (7, "date", "2026-12-04"),
+        (9, "version number", "1.2.3"),
+    ]

@@ -72,9 +72,9 @@ def _convert_fixed(arr: np.ndarray, name: str) -> np.ndarray | None:
 def as_float_frames(frames: Sequence[object], names: Sequence[str]) -> list[np.ndarray]:
     """Convert the frames of one call to ``float32`` in ``[0, 1]``, float frames jointly.
 
-    See the module docstring for the rule.  Frames already of the right kind are
-    converted exactly as :func:`as_float_image` always did (results for ``uint8``,
-    ``uint16`` and float frames in ``[0, 1]`` do not depend on the other frames).
+    See the module docstring for the rule.  ``uint8``, ``uint16`` and ``bool`` frames
+    and float frames in ``[0, 1]`` are converted on their own: their results do not
+    depend on the other frames of the call.
 
     Parameters
     ----------
@@ -112,7 +112,7 @@ def as_float_frames(frames: Sequence[object], names: Sequence[str]) -> list[np.n
             raise ValueError(f"{names[i]}: contains NaN or infinite values")
         lo = a_min if lo is None else min(lo, a_min)
         hi = a_max if hi is None else max(hi, a_max)
-        # Range test on the float32 values, exactly as before joint scaling existed.
+        # Range test on the float32 values: a frame is in [0, 1] when its float32 cast is.
         with np.errstate(over="ignore"):
             lo32, hi32 = np.float32(a_min), np.float32(a_max)
         if lo32 < -_FLOAT_TOL or hi32 > 1.0 + _FLOAT_TOL:

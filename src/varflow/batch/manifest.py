@@ -152,8 +152,8 @@ class Manifest:
         -------
         str or None
             None when the manifest is new or was written with the same settings,
-            else a short description of the differences (``varflow version 0.1.0
-            -> 0.2.0``, ``params: n_warps 3 -> 2``, ...).
+            else a short description of the differences (e.g. ``varflow version
+            1.2 -> 1.3``, ``params: n_warps 3 -> 2``).
         """
         meta = self.meta()
         old_hash = meta.get("params_hash")

@@ -4,7 +4,7 @@ The large-displacement counterpart of :mod:`varflow.generators.photo_pairs`: the
 same photographs (bundled with scikit-image), the same area-sampling renderer and
 the same layered scenes, but the moving objects travel 30-150 px between the two
 frames, often farther than their own size, which is what coarse-to-fine warping
-loses (issue 13).  Defaults of the large-displacement mode are chosen on the
+loses.  Defaults of the large-displacement mode are chosen on the
 *tuning* split (:data:`TUNING_SEEDS`, seeds 0-3) and reported on the disjoint
 *reporting* split (:data:`REPORTING_SEEDS`, seeds 100-103).
 

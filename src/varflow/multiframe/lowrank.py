@@ -92,10 +92,9 @@ DEFAULT_SAMPLES_PER_ROW = 20
 #: columns, ~25 per motion stratum) gets a basis that differs from one sample to the
 #: next by enough to move a small fast object's trajectories by pixels, and a
 #: last-bit difference of the kernels changes the sample (through the k-means of
-#: the strata).  On the 5-frame fast-object clip of the tests the larger far-frame
-#: error on the object was 1.6-4.8 px over three seeds with 200 columns, 1.9-2.3 px
-#: with 4000 (frame 0's background 0.4-1.2 against 0.017 px).  The seed PCP costs
-#: ``O(m² s)`` per iteration, small beside the l1 filtering of all columns.
+#: the strata).  4000 columns make the basis, and a small fast object's far-frame
+#: error, far steadier across seeds and builds (see benchmarks/HISTORY.md).  The seed
+#: PCP costs ``O(m² s)`` per iteration, small beside the l1 filtering of all columns.
 DEFAULT_MIN_SAMPLES = 4000
 #: Default relative threshold of the rank estimate: keep ``σ_i > DEFAULT_RANK_TOL · σ_1``.
 #: The seed PCP returns an exactly low-rank L (singular value thresholding), whose

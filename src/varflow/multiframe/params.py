@@ -22,23 +22,20 @@ from .visibility import VisibilityParams
 
 __all__ = ["TVL1_ENERGY", "FINAL_REPAIR_DISTANCES", "MultiFrameParams", "RLRParams"]
 
-#: Offsets (pixels) of the final repair.  Tuning split of the photographic clips,
-#: mean EPE / occlusion accuracy: (2, 4, 8) 0.874 / 0.966, (2, 4) 0.861 / 0.967,
-#: (4,) 0.860 / 0.966 (objects 0.732 → 0.745, illumination 2.93 → 2.84) at a third
-#: of the cost of three distances.
+#: Offsets (pixels) of the final repair.  Default (4,): as accurate on the photographic
+#: clips as (2, 4) and (2, 4, 8), at a third of the cost of three distances; see
+#: benchmarks/HISTORY.md.
 FINAL_REPAIR_DISTANCES = (4,)
 
-#: The default two-frame energy of the multi-frame methods (issue 27): ``tvl1``'s data
-#: term and regulariser — the grey channel, λ_D = 15 with gradient constancy γ = 140,
-#: Huber-TV ε_H = 0.02, edge weight c = 30, texture α = 0.3 and the noise rule — with
-#: the plain energy's solver settings (5 warps per level, 50 iterations of the initial
-#: flows), the weighted median on every level (r = 3, as RLR had since issue 11) and no
-#: sharpness match (it matches two frames).  rlr on the photographic tuning split (with
-#: the link's fit gate, ``link_gate`` 2): mean EPE 0.665 against 0.851 with the book's
-#: plain energy (affine 0.034 / 0.041, nonrigid 0.104 / 0.104, objects 0.651 / 0.677,
-#: illumination 2.05 / 2.90, noise 0.48 / 0.53).  Without the gate its link drags a small
-#: fast object off its track (the fast-object clip of the tests: far frames 5.2-6.7 px
-#: over L-step seeds, 0.12 px decoupled).
+#: The default two-frame energy of the multi-frame methods: ``tvl1``'s data term and
+#: regulariser — the grey channel, λ_D = 15 with gradient constancy γ = 140, Huber-TV
+#: ε_H = 0.02, edge weight c = 30, texture α = 0.3 and the noise rule — with the plain
+#: energy's solver settings (5 warps per level, 50 iterations of the initial flows), the
+#: weighted median on every level (r = 3) and no sharpness match (it matches two
+#: frames).  With it rlr is more accurate than with the book's plain energy on the
+#: photographic clips, most under a change of light; the link's fit gate (``link_gate``)
+#: keeps its link from dragging a small fast object off its track.  See
+#: benchmarks/HISTORY.md.
 TVL1_ENERGY = PRESETS["multiframe"]
 
 
@@ -78,8 +75,8 @@ class MultiFrameParams(Routed):
         s, primal step of the primal-dual iteration; the dual step is
         σ = 1 / (8 s) (so that s σ ||∇||² ≤ 1).  Default 0.25.
     ustep_iterations : int
-        Primal-dual iterations of the U-step per warp and alternation.  Default 50
-        (the plain energy's ``max_iterations``, which served both before).
+        Primal-dual iterations of the U-step per warp and alternation.  Default 50,
+        the ``max_iterations`` of the initial flows in :data:`TVL1_ENERGY`.
     alternations : int
         Coupling-target / U-step alternations per warp.  Default 1.
     data_prox : {"auto", "exact", "cd"}
@@ -120,10 +117,10 @@ class MultiFrameParams(Routed):
         ``varflow.flow(frames[ref], frames[n], "tvl1-ld")`` does) as a candidate,
         kept per pixel where it fits the frames better by the census cost of
         :mod:`varflow.multiframe.propagate`, and offer the splatted inverse to the
-        visibility's backward flows.  Default True (tuning split of the
-        photographic clips, 31 frames: mean EPE 0.578 against 0.665 without,
-        lower on every family; affine 0.0334 / 0.0335, nonrigid 0.102 / 0.104,
-        objects 0.438 / 0.651, illumination 1.99 / 2.05, noise 0.325 / 0.483).
+        visibility's backward flows.  Default True: it finds again a structure that
+        moves farther than its size, and rlr is more accurate with it on every
+        family of the photographic clips, most on objects and noise; see
+        benchmarks/HISTORY.md.
     visibility : bool
         Estimate which reference points are hidden in which frame from the
         initial trajectories (:mod:`varflow.multiframe.visibility`) and switch the
@@ -136,13 +133,12 @@ class MultiFrameParams(Routed):
         median cost.  Default 4.
     visibility_levels : int
         Pyramid levels of the backward flows of the visibility estimate, refined
-        from the inverted initial trajectories.  Default 1 (tuning split of the
-        photographic clips: occlusion accuracy 0.966 against 0.959 with 3 levels,
-        mean EPE 0.874 for both; a third of the time).
+        from the inverted initial trajectories.  Default 1: the accuracy of 3
+        levels (occlusions found no worse) at a third of the time; see
+        benchmarks/HISTORY.md.
     visibility_warps : int
-        Warps per level of those backward flows.  Default 2 (tuning split of the
-        photographic clips: mean EPE 0.858 / occlusion accuracy 0.967, against
-        0.861 / 0.966 with 5 warps).
+        Warps per level of those backward flows.  Default 2: as accurate as 5
+        warps on the photographic clips, for less time; see benchmarks/HISTORY.md.
     final_repair : bool
         After the refinement, let every pixel of every frame take the vector of a
         pixel a few pixels away where that fits the frames better
@@ -156,11 +152,9 @@ class MultiFrameParams(Routed):
         propagation and in the final repair.  Their flows come from the whole
         pyramid (no propagated band along object edges to undo), and on real
         footage the repair's photometric cost is less reliable than those flows:
-        on MPI-Sintel final/alley_1 (9-frame windows, frame r+1 against the
-        ground truth, references 5…10) the defaults' mean AEE is 0.297, and 0.328
-        with this repair (measured while ``adjacent_link_factor`` still spared the
-        hidden entries; the two-frame flow: 0.329; at r = 10 0.311 against 0.359).
-        Default False.
+        on MPI-Sintel final/alley_1 (frame r + 1 of 9-frame windows) this repair
+        brings the error up to that of the two-frame flow.  Default False; see
+        benchmarks/HISTORY.md.
     repair_cost : {"colour", "relit", "census"}
         The residual that the propagation's repair and the final repair compare
         (:func:`varflow.ops.fusion.repair_with`): the frames' colours; the colours
@@ -169,12 +163,11 @@ class MultiFrameParams(Routed):
         :func:`varflow.ops.fusion.relight`); or their soft census planes, which a
         change of light leaves alone but which also drop the colours.  Under a
         change of light the colour cost prefers wrong vectors that land on a
-        matching brightness.  Default "relit" (photographic suite, full rlr, mean
-        EPE colour → relit: tuning split 0.5529 → 0.2280, illumination 1.9649 →
-        0.3272, objects and noise 2 % worse; reporting split 0.6244 → 0.2251,
-        illumination 2.3816 → 0.3866; census repaired the light changes as well,
-        but its initial trajectories were worse on the tuning split's objects and
-        noise clips).
+        matching brightness.  Default "relit": it repairs the illumination family
+        of the photographic clips, which "colour" loses, for slightly higher
+        errors on objects and noise; "census" repairs the light changes too but
+        gives worse initial trajectories on objects and noise.  See
+        benchmarks/HISTORY.md.
     relaxed_data : bool
         Relax the U-step's data term as TV-L1 does (Zach et al. 2007): the term
         becomes ``min_v |u − v|²/(2θ) + λ_D D(v)`` with θ = ``coupling`` of the
@@ -182,17 +175,16 @@ class MultiFrameParams(Routed):
         quadratic for residuals below ``λ_D θ |∇I|²``, L1 beyond.  The link stays an
         exact L1 term on the trajectories.  False keeps the data term itself (the
         book's U-step).  Default True: on real footage the relaxed term is the
-        better one (MPI-Sintel final/alley_1, 9-frame windows, frame r + 1: 0.2508
-        against 0.2586, lower at every reference r = 5…10; RubberWhale frame 11:
-        0.0967 against 0.0992), while the photographic tuning split measures mean
-        EPE 0.2284 against 0.2254 (affine and nonrigid lower, objects, illumination
-        and noise higher; see benchmarks/HISTORY.md).
+        better one (MPI-Sintel final/alley_1 at every reference, RubberWhale frame
+        11), while on the photographic tuning clips it is slightly worse on the
+        mean (lower on affine and nonrigid, higher on the other families); see
+        benchmarks/HISTORY.md.
     hidden_data_weight : float
         Factor of the data term of the entries marked hidden, in [0, 1]: 0 switches
         it off, 1 keeps it (the visibility then only steers the coupling: the
-        L-step's weights and ``hidden_link_weight``).  Default 0 (development clips
-        of the tuning split: mean EPE 0.189 against 0.193 with 1; RubberWhale and
-        the noisy synthetic clips the same within 1 %).
+        L-step's weights and ``hidden_link_weight``).  Default 0: slightly more
+        accurate than 1 on photographic development clips, the same on RubberWhale
+        and the noisy synthetic clips; see benchmarks/HISTORY.md.
     """
 
     flow_method: str = DEFAULT_METHOD
@@ -289,8 +281,8 @@ class RLRParams(MultiFrameParams):
         τ, weight of the robust link ``||U − L||_1`` (per pixel and component, in
         the units of the TV weight); the frames next to the reference take a
         fraction of it on clean footage (``adjacent_link_factor``).  0 decouples
-        the frames (no L-step).  Default 2 (chosen on the tuning split of the
-        photographic clips, :mod:`varflow.generators.photo`).
+        the frames (no L-step).  Default 2, chosen on the tuning clips (see
+        benchmarks/HISTORY.md).
     adjacent_link_factor : float
         a_min, the smallest factor of the link weight of the two frames next to
         the reference, ``ref ± 1``: their link weights (τ, and τ_h where hidden)
@@ -300,11 +292,10 @@ class RLRParams(MultiFrameParams):
         occlusion and change of appearance) unless the frames are noisy, while the
         low-rank fit of their rows follows the other frames: on clean real
         footage, whose trajectories are not low rank over a few frames, a strong
-        link drags them (RubberWhale frame 11: AEE 0.1305 at a_1 = 1, 0.0987 with
-        the rule, a_1 ≈ 0.011, against 0.0994 for the two-frame flow), and on noisy frames
-        the link is what averages the noise out (the noisy procedural clip of the
-        tests, σ ≈ 0.04: mean EPE 0.074 at a_1 = 1, 0.101 at 0.1).  In [0, 1];
-        1 links every frame alike.  Default 0.01.
+        link drags them (on RubberWhale a_1 = 1 is well above the two-frame flow,
+        the rule on a par with it), and on noisy frames the link is what averages
+        the noise out.  In [0, 1]; 1 links every frame alike.  Default 0.01; see
+        benchmarks/HISTORY.md.
     adjacent_noise : float
         σ_0 of that rule, intensity units of [0, 1] frames: the residual noise at
         which the adjacent frames are linked as strongly as the others (a_1 = 1);
@@ -322,15 +313,14 @@ class RLRParams(MultiFrameParams):
         Relative singular-value threshold of the L-step's basis: directions of the
         seed PCP's low-rank part with ``σ_i ≤ rank_tol · σ_1`` are dropped (the
         rank is estimated, never given).  Dense estimation noise otherwise enters
-        ``L`` as many tiny singular values.  Default 0.003 (tuning split of the
-        photographic clips: 0.03 underfits a small moving object, fitted to the
-        exact trajectories it leaves 0.44 px against 0.02 px).
+        ``L`` as many tiny singular values.  Default 0.003: 0.03 underfits a small
+        moving object of the photographic clips; see benchmarks/HISTORY.md.
     rank_rule : {"relative", "noise"}
         Rank of the L-step's basis: the ``rank_tol`` threshold relative to the
         largest singular value, or the optimal hard threshold of Gavish & Donoho
         (2014) for the noise level estimated from the singular values
-        (:func:`varflow.multiframe.lowrank.noise_rank`).  Default "relative"
-        (RubberWhale frame-11 AEE 0.132 against 0.141 with "noise").
+        (:func:`varflow.multiframe.lowrank.noise_rank`).  Default "relative", the
+        more accurate of the two on RubberWhale; see benchmarks/HISTORY.md.
     lowrank_method : {"linear", "exact"}
         L-step solver: l1 filtering on a random column sample (linear cost) or full
         PCP (reference; its L is truncated by the same ``rank_tol`` rule).
@@ -348,8 +338,8 @@ class RLRParams(MultiFrameParams):
         Run the L-step on mean velocities: frame n's rows divided by ``|n − ref|``
         (then multiplied back), so that far frames, whose displacements are larger,
         do not dominate the fit; constant-velocity motion becomes rank 2.
-        Default True (synthetic suite: mean EPE 0.0644 against 0.0674 without;
-        RubberWhale frame-11 AEE 0.176 against 0.283).
+        Default True: more accurate on the synthetic suite and on RubberWhale; see
+        benchmarks/HISTORY.md.
     lowrank_strata : int
         Motion clusters of the L-step's stratified column sample
         (:func:`varflow.multiframe.lowrank.sample_columns`); 0 = a uniform sample,
@@ -361,21 +351,18 @@ class RLRParams(MultiFrameParams):
     lowrank_tolerance : float
         Relative residual at which the l1 fit of a column stops
         (:func:`varflow.multiframe.lowrank.l1_regression`, ``tol``).  The fit is a
-        target for the next U-step, not a result: 1e-4 differs from 1e-7 by
-        2.5e-4 px on average and takes 0.6× the iterations.  Default 1e-4.
+        target for the next U-step, not a result, so a loose tolerance costs a
+        small fraction of a pixel and saves iterations.  Default 1e-4; see
+        benchmarks/HISTORY.md.
 
     link_gate : float
         k of the link's fit gate (:func:`fit_gate`): the link weight of the visible
         entries of a region is scaled by ``1 / (1 + (r / (k m))²)``, ``r`` the
         region's misfit to the low-rank target and ``m`` the clip's median misfit,
         so that where the motion is not low rank the refinement is decoupled; 0
-        turns the gate off.  Default 1 (tuning split of the photographic clips with
-        the matching-guided candidates: mean EPE 0.564 at k = 1 against 0.578 at
-        k = 2, lower or equal on every family; the decoupled refinement,
-        ``link_weight=0``, 0.535: the link still costs on the objects and
-        illumination families.  The fast-object clip of the tests, far frames
-        0.22-0.48 px at k = 1, 0.36-1.04 at k = 2, 0.9-4.4 ungated, 0.12-0.15
-        decoupled).
+        turns the gate off.  Default 1: lower or equal errors than k = 2 on every
+        family of the photographic clips, and a small fast object stays nearer its
+        track than at k = 2 or ungated; see benchmarks/HISTORY.md.
     decoupled_fusion : bool
         Also refine without the link (``link_weight = 0``, the same initial
         trajectories and visibility) and keep, per pixel and frame, whichever of
@@ -385,50 +372,45 @@ class RLRParams(MultiFrameParams):
         of the frames (:func:`residual_noise`), blended near the margin
         (``fusion_softness``).  The link thus stays where the
         motion is low rank or the frames are too noisy to tell, and gives way where
-        it pulls a region off its data.  Default True (tuning split of the
-        photographic clips, warm kernel cache, the two refinements fused after the
-        fact: mean EPE 0.544 against 0.581 without and 0.567 for ``link_weight=0``;
-        below the decoupled refinement on every family and below the linked one on
-        every family but affine, 0.0338 against 0.0336).  Costs a second refinement
-        (not a second initialisation).
+        it pulls a region off its data.  Default True: on the photographic clips
+        the fusion is more accurate than either refinement alone (below the
+        decoupled one on every family, below the linked one on every family but
+        affine); see benchmarks/HISTORY.md.  Costs a second refinement (not a
+        second initialisation).
     fusion_margin : float
         m₀, the cost advantage the decoupled displacement needs on clean frames
         (units of the truncated census cost, :func:`varflow.ops.fusion.flow_cost`).
-        Default 0.005 (tuning split with ``fusion_noise`` 0: margin 0 gives 0.5454
-        with affine 0.0396, 0.005 gives 0.5449, 0.02 gives 0.5497).
+        Default 0.005: the most accurate of 0, 0.005 and 0.02 on the photographic
+        tuning clips (0 loses on affine); see benchmarks/HISTORY.md.
     fusion_noise : float
         β of the margin's noise term ``β σ²``: on noisy frames a lower census cost
-        is as likely the noise as the motion.  Default 15 (tuning split 0.5442; 5
-        gives 0.5439, 30 0.5453; a 12-frame affine clip with noise σ = 0.04, σ_r =
-        0.057: margin 0 gives 0.117, 0.005 gives 0.109, 0.054 (β = 15) 0.090, the
-        linked refinement alone 0.089, the decoupled one 0.147).
+        is as likely the noise as the motion.  Default 15: on a noisy clip the
+        fusion then keeps the linked refinement, which averages the noise, while
+        5 to 30 are on a par on the photographic tuning clips; see
+        benchmarks/HISTORY.md.
     fusion_softness : float
         κ, the width of the fusion's blend as a fraction of the margin m
         (:func:`fuse_decoupled`): the decoupled displacement's weight is the
         logistic function of ``(C_c − C_d − m) / (κ m)``, ½ at a cost advantage of m
         and near 0 or 1 a few κ·m away, so the two refinements are mixed where the
-        census cost hardly tells them apart; 0 is the hard choice.  Default 0.5
-        (tuning split, the same refinements fused afterwards: mean EPE / far EPE
-        0.2279 / 0.489 hard, 0.2254 / 0.483 at 0.5, 0.2253 / 0.481 at 1, 0.2267 /
-        0.483 at 2; at 0.5 lower or equal on every family, affine 0.0331 against
-        0.0332, illumination 0.3245 against 0.3280).
+        census cost hardly tells them apart; 0 is the hard choice.  Default 0.5:
+        lower or equal errors than the hard choice on every family of the
+        photographic tuning clips; see benchmarks/HISTORY.md.
     fusion_evidence : float
         γ, the weight of the region's cost difference in the fusion
         (:func:`fuse_decoupled`): a pixel's ``C_c − C_d`` gains γ times its mean
         over the textured pixels around it, so that a flat region, where both runs
         fit the frames equally, follows the textured surroundings that tell them
-        apart.  0 compares each pixel alone (0.7.1).  Default 3 (tuning
-        split, the two refinements of 0.7.1 fused afterwards, mean EPE / mean far
-        EPE over the families: 0 0.2317 / 0.4748; γ 1 / 2 / 3 at radius 8 0.2288 /
-        0.4658, 0.2281 / 0.4639, 0.2279 / 0.4637; at radius 16 0.2293 / 0.2287 /
-        0.2286; over the whole frame 0.2293 / 0.2285 / 0.2284; every family lower at
-        γ 3, radius 8, than at 0).
+        apart.  0 compares each pixel alone.  Default 3 (with ``fusion_radius``
+        8): the lowest mean error of the grid of γ and σ tried on the photographic
+        tuning clips, and every family and the far frames lower than at 0; see
+        benchmarks/HISTORY.md.
     fusion_radius : float
         σ of the region of ``fusion_evidence``, pixels.  Default 8 (see there).
 
     The default energy is :data:`TVL1_ENERGY` (:meth:`MultiFrameParams.default_flow_params`);
-    ``flow_params=PlainTVL1Params(weighted_median_radius=3)`` is the book's plain
-    energy with the weighted median, RLR's default before issue 27.
+    ``flow_params=preset("plain", weighted_median_radius=3)`` is the book's plain
+    energy with the weighted median.
     """
 
     link_weight: float = 2.0

@@ -14,9 +14,9 @@ at the coarse levels.  Here the frames are visited outward from the reference,
   without having to find the whole displacement again;
 * **direct** ``D_n`` (only with ``direct=True``): the two-frame flow from the
   reference to frame ``n`` over the whole pyramid, from zero motion (what
-  ``twoframe`` computes).  Off by default: on the tuning split of the
-  photographic clips the fusion let chance matches of the direct flow in on the
-  far frames (mean EPE 1.64 against 0.88 with the propagated candidate alone).
+  ``twoframe`` computes).  Off by default: on the photographic clips the fusion
+  lets chance matches of the direct flow in on the far frames (see
+  benchmarks/HISTORY.md).
 
 * **matching-guided** (only with ``matching=True``): the two-frame flow from the
   reference to frame ``n`` of the ``tvl1-ld`` method, computed exactly as
@@ -32,14 +32,12 @@ cost (:func:`varflow.ops.fusion.fuse`: a residual aggregated with adaptive
 support weights of the reference frame); the propagated candidate wins ties.
 The residual is that of the frames' soft census planes
 (:func:`varflow.ops.fusion.census_planes`, ``cost="census"``), which a change of
-brightness or contrast leaves alone, or of their colours (``"colour"``).  On the
-tuning split of the photographic clips (seeds 0–2, 31 frames), fusing the
-propagated and the ``tvl1-ld`` candidates gave initial trajectories of mean EPE
-0.486 with the census cost and 0.648 with the colour cost (the propagated
-candidates alone 0.697, ``tvl1-ld`` alone 0.661): under an illumination drift
-the colour residual is truncated everywhere and the choice is left to chance
-(1.33 against 2.20 on that family).  For ``n = r ± 1`` there is nothing to
-propagate: the direct flow is the first candidate.  Last,
+brightness or contrast leaves alone, or of their colours (``"colour"``).  The
+census cost is the default: under an illumination drift the colour residual is
+truncated everywhere and the choice is left to chance, and on the photographic
+clips the census fusion gives better initial trajectories than the colour fusion
+or either candidate alone (see benchmarks/HISTORY.md).  For ``n = r ± 1`` there is
+nothing to propagate: the direct flow is the first candidate.  Last,
 :func:`varflow.ops.fusion.repair` lets every pixel take the vector of a pixel a
 few pixels away where that fits the frames better: the coarse-to-fine smoothing
 leaves a band of the wrong motion along object edges, and a propagated band

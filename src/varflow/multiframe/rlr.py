@@ -9,7 +9,7 @@ low-rank matrix ``L``::
 
 with ``ρ_{n,c}`` the colour constancy residual of frame ``n`` against the reference,
 linearised around the current estimate and re-warped coarse to fine, and ``g`` the
-edge weight of the reference frame.  The data term is TV-L1's whole one (issue 27):
+edge weight of the reference frame.  The data term is TV-L1's whole one:
 the channels of :func:`varflow.twoframe.tvl1.data_channels` — colour or grey
 (``grey``), gradient constancy (γ = ``gradient_weight``), the normalisation ζ
 (``data_normalisation``) — with TV-L1's noise rule (``noise_reference``,
@@ -42,16 +42,14 @@ It is minimised by alternation, after every warp of every pyramid level:
    alone (:func:`varflow.ops.prox.prox_linear_l1`), which converges to the same
    point and costs about a fifth per iteration for colour.  ``data_prox="auto"``
    (default) is exact for a data term of one channel (a grey frame without the
-   gradient term) and coordinate descent otherwise: for colour both give the same
-   errors (coordinate descent against exact: RubberWhale with τ = 0.02 0.0982 /
-   0.0983, synthetic suite mean EPE 0.0644 / 0.0646), and for TV-L1's grey + gradient
-   term (3 channels) too (a 15-frame noisy photographic clip: 0.300 against 0.303,
-   in 0.39 of the time).  With the relaxed data term each iteration first sets
-   ``v = prox_{λ_D θ D}(u)`` by the same data-term machinery, then takes the
-   primal step with ``G_n = |u − v|²/(2θ) + τ |u − l_n|_1``, in closed form (the
-   quadratics' centre moved towards ``l_n`` by the link's soft threshold,
-   :func:`_relaxed_primal_row`); its fixed point is the minimiser of TV-L1's relaxed
-   energy (tested against TV-L1's own scheme).
+   gradient term) and coordinate descent otherwise: for colour and for TV-L1's
+   grey + gradient term (3 channels) both give the same errors, coordinate descent
+   in a fraction of the time (see benchmarks/HISTORY.md).  With the relaxed data
+   term each iteration first sets ``v = prox_{λ_D θ D}(u)`` by the same data-term
+   machinery, then takes the primal step with ``G_n = |u − v|²/(2θ) + τ |u − l_n|_1``,
+   in closed form (the quadratics' centre moved towards ``l_n`` by the link's soft
+   threshold, :func:`_relaxed_primal_row`); its fixed point is the minimiser of
+   TV-L1's relaxed energy (tested against TV-L1's own scheme).
 2. **L-step** (``U`` fixed).  ``min_L α ||L||_* + τ ||U − L||_1`` is principal
    component pursuit with ``λ = τ / α``, solved in linear time by l1 filtering
    (:func:`varflow.multiframe.lowrank.lowrank_step`).  ``α`` follows from the
@@ -152,8 +150,8 @@ __all__ = [
     "track_rlr",
     "adjacent_factor",
     "residual_noise",
-    # Issue 46 split this module by stage; the names that lived here stay importable
-    # from it (varflow itself imports them from their homes): the parameters from
+    # Re-exported so that code importing them from this module keeps working (varflow
+    # itself imports them from their homes): the parameters from
     # varflow.multiframe.params, the refinement from .refine, the fusion from .fuse,
     # the U-step from .ustep, the exact prox from varflow.ops.prox.
     "TVL1_ENERGY",

@@ -50,9 +50,9 @@ Stages (each a Numba kernel with a NumPy/SciPy reference, ``engine="numpy"``):
 Defaults.  K = 128 as in the paper (LA).  The paper's kernel is ``exp(−a D)``
 with a ≈ 1 on SED edges (values in [0, 1], thin, near 0 on texture) plus a tiny
 constant; our gradient edges also respond to texture and are wider, so the
-distance scale was re-chosen for this cost map: ``a = 3``, ``s = 0.05``,
+distance scale is set for this cost map: ``a = 3``, ``s = 0.05``,
 ``ε = 0.05``, ``σ = 0.5`` (a full edge one px wide divides a weight by e³; a seed
-3 px away in a flat area keeps e^−0.45 ≈ 0.64).  They were chosen on ground-truth
+3 px away in a flat area keeps e^−0.45 ≈ 0.64).  They are tuned on ground-truth
 samples (3 px grid) of the Sintel final pairs ``market_5`` 2, ``cave_2`` 2,
 ``bandage_1`` 35 and ``alley_1`` 5, not on the pair the tests report
 (``market_5`` 9 → 10); larger ``a`` favours perfect matches, smaller ``a``

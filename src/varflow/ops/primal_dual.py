@@ -11,7 +11,7 @@ float32 arrays, in place, so that a solver sweeps rows in parallel blocks
 * :func:`~varflow.ops.prox.data_prox_row`: the prox of the linearised multi-channel
   L1 data term ``λ Σ_c |a_c + ∇I_c · u|`` by dual coordinate descent (the row version
   of :func:`varflow.ops.prox.prox_linear_l1`), which lives in :mod:`varflow.ops.prox`
-  with the other variants of that prox (issue 46) and is imported here;
+  with the other variants of that prox and is imported here;
 * :func:`primal_row`: ``u ← d + θ div p`` with the Neumann divergence of
   :func:`varflow.ops.differences.divergence`;
 * :func:`dual_row`: the dual TV step ``p ← Π_{|p| ≤ g}(p + step · T∇u)``, with the

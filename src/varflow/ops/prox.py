@@ -15,9 +15,9 @@ three-case thresholding of Zach, Pock & Bischof 2007), and
 :func:`prox_linear_l1_exact` enumerates the faces of the piecewise-quadratic energy
 (for tests and small problems).
 
-Every variant of this linear-L1 prox lives here, once (issue 46), each with its NumPy
-reference; the solvers of :mod:`varflow.twoframe` and :mod:`varflow.multiframe`
-import them:
+Every variant of this linear-L1 prox lives here, once (one place to test and to fix),
+each with its NumPy reference; the solvers of :mod:`varflow.twoframe` and
+:mod:`varflow.multiframe` import them:
 
 * :func:`prox_linear_l1` (NumPy; channels last, one step) and
   :func:`prox_linear_l1_pixel_step` (NumPy; planar, a step per pixel): dual

@@ -32,9 +32,9 @@ from .pyramid import smooth_image
 
 __all__ = ["SHARPNESS_TOLERANCE", "sharpness", "match_sharpness"]
 
-#: |log(S1/S0)| at or below which the pair is left alone.  Measured: 0.02 or less on
-#: the 8 Middlebury pairs and on the clean, noisy and relit photographic pairs of the
-#: tuning split; 0.46-1.06 on its blurred pairs.
+#: |log(S1/S0)| at or below which the pair is left alone (dimensionless).  Default 0.15:
+#: well above the values of pairs seen through the same optics (clean, noisy or relit)
+#: and well below those of pairs with one frame blurred; see benchmarks/HISTORY.md.
 SHARPNESS_TOLERANCE = 0.15
 
 _MAX_SIGMA = 6.0
