@@ -459,7 +459,7 @@ class TVL1Params(Routed):
         Default 0.6.
     sharpness_match : bool
         Before anything else, blur the sharper frame by a Gaussian until both frames
-        are equally sharp when their sharpness (mean |∇I|² / var I) differs by more
+        are equally sharp when their sharpness (``mean |∇I|² / var I``) differs by more
         than :data:`varflow.ops.sharpness.SHARPNESS_TOLERANCE` in log units (one
         frame motion-blurred or out of focus); pairs of equal sharpness are
         untouched.  Two-frame runs only.  Default True.
