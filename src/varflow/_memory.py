@@ -15,25 +15,30 @@ such as ``512M``, ``8G``, ``1.5GiB``) replaces the measured available memory;
 How the factors were measured
 -----------------------------
 Peak resident memory of one call in a fresh process (Linux ``VmHWM`` after
-resetting it with ``/proc/self/clear_refs`` once the JIT had compiled on a small
-input), minus the resident memory before the call; ``uint8`` inputs created before
-the baseline, default parameters, ``NUMBA_NUM_THREADS=1``.  Two-frame methods at
-256x320 and 512x640 grey and 256x320 RGB; trackers at 128x160 and 256x320 with
-5 frames, 128x160 with 9 frames and 128x160 RGB with 5 frames
-(``benchmarks/bench_memory.py``).  Measured peaks, bytes per pixel (grey; RGB):
+resetting it with ``/proc/self/clear_refs`` once the kernels were loaded from Numba's
+cache on a small input), minus the resident memory before the call; ``uint8`` inputs
+created before the baseline, default parameters, ``NUMBA_NUM_THREADS=1``
+(``benchmarks/bench_memory.py``).  Two-frame methods at 256x320 and 512x640 grey and
+256x320 RGB; trackers at 128x160 and 256x320 with 5 frames, 128x160 with 9 frames and
+128x160 RGB with 5 frames.  Measured peaks, bytes per pixel:
 
-=============  ==================  ====================  ==================
-method         256x320             512x640               RGB 256x320
-=============  ==================  ====================  ==================
-tvl1           150                 149                   298
-tvl1-fast      125                 118                   218
-tensor         201                 193                   357
-sparse-1d      460                 304                   564
-sparse-2d      380                 304                   466
-sparse-2x1d    308                 264                   418
-sparse-dct     393                 304                   525
-tvl1-ld        429                 446                   479
-=============  ==================  ====================  ==================
+================  ============  ============  ============
+method            256x320       512x640       RGB 256x320
+================  ============  ============  ============
+tvl1              195           203           207
+tvl1-fast         161           169           188
+tvl1-ld           478           486           524
+tensor            194           205           312
+sparse-1d         417           315           547
+sparse-2d         365           333           470
+sparse-2x1d       287           272           417
+sparse-dct        403           308           496
+tvl1-tensor       245           247           240
+tvl1-sparse-1d    461           365           470
+tvl1-sparse-2d    425           373           415
+tvl1-sparse-2x1d  335           312           365
+tvl1-sparse-dct   431           359           432
+================  ============  ============  ============
 
 =============  ============  ============  ============  ============
 tracker        128x160 F=5   256x320 F=5   128x160 F=9   RGB 128x160 F=5
@@ -44,11 +49,13 @@ chain          141           175           195           345
 twoframe       154           176           207           352
 =============  ============  ============  ============  ============
 
+The trackers' figures were taken with their earlier default energy (colour channels),
+with the JIT compiling in the measuring process; ``bench_memory.py`` re-measures them.
 The model fitted to them is ``fixed + pixels * (base + per_frame * F +
 per_channel * (C - 1) * F')`` with ``F' = 1`` for two-frame methods and ``F' = F``
 for trackers (each registry entry's :class:`~varflow.registry.MemoryFactors`),
 times a safety margin :data:`MARGIN`.  The
-sparse methods carry 5-16 MiB that does not grow with the image (dictionary,
+sparse methods carry up to 11 MiB that does not grow with the image (dictionary,
 Gram matrices), hence their higher cost per pixel on small images.
 """
 
@@ -84,7 +91,7 @@ _GIB = 2**30
 
 #: Used for a method without measured factors: the largest of each kind.
 _FALLBACK = {
-    "flow": MemoryFactors(base=455, per_channel=80, fixed=16 * _MIB),
+    "flow": MemoryFactors(base=490, per_channel=80, fixed=16 * _MIB),
     "track": MemoryFactors(base=145, per_frame=145, per_channel=32),
 }
 #: Multiplies every estimate: allocator slack, run-to-run variation, other parameters.

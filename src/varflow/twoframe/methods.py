@@ -47,52 +47,52 @@ def _register(name: str, solve_warp: Any, description: str, memory: MemoryFactor
                          solve_warp=solve_warp, run=run))
 
 
-# Memory factors: bytes per pixel measured as described in varflow._memory.
+# Memory factors: bytes per pixel measured by benchmarks/bench_memory.py (varflow._memory).
 _register("tvl1", _tvl1.solve_warp,
           "TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
           "ROF texture, median)",
-          MemoryFactors(base=150, per_channel=75), _TVL1 + _WMEDIAN, 40)
+          MemoryFactors(base=205, per_channel=10), _TVL1 + _WMEDIAN, 40)
 _register("tvl1-fast", _tvl1.solve_warp,
           "TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
-          MemoryFactors(base=125, per_channel=50), _TVL1, 35)
+          MemoryFactors(base=170, per_channel=15), _TVL1, 35)
 _register("tvl1-ld", _tvl1.solve_warp,
           "TV-L1 for large displacements (PatchMatch matches, edge-aware interpolation, "
           "fused per level)",
-          MemoryFactors(base=455, per_channel=30),
+          MemoryFactors(base=490, per_channel=25),
           _TVL1 + ("varflow.ops.matching:_patchmatch_pair",
                    "varflow.ops.interpolation:_fit_kernel"), 60, run=_ld.tvl1_ld)
 _register("tensor", _tensor.solve_warp,
           "tensor-directed TV-L1 (anisotropic TV following image structure)",
-          MemoryFactors(base=200, per_channel=80), _TVL1, 35)
+          MemoryFactors(base=205, per_channel=60), _TVL1, 35)
 _register("sparse-dct", _sparse.solve_warp,
           "sparse-regularised TV-L1, fixed overcomplete DCT dictionary",
-          MemoryFactors(base=275, per_channel=65, fixed=10 * _MIB), _SPARSE, 60)
+          MemoryFactors(base=280, per_channel=50, fixed=10 * _MIB), _SPARSE, 60)
 _register("sparse-1d", _sparse.solve_warp,
           "sparse-regularised TV-L1, MOD dictionary shared by u and v",
-          MemoryFactors(base=255, per_channel=55, fixed=16 * _MIB), _SPARSE, 60)
+          MemoryFactors(base=285, per_channel=65, fixed=11 * _MIB), _SPARSE, 60)
 _register("sparse-2x1d", _sparse.solve_warp,
           "sparse-regularised TV-L1, MOD dictionaries for u and for v",
-          MemoryFactors(base=250, per_channel=55, fixed=5 * _MIB), _SPARSE, 60)
+          MemoryFactors(base=275, per_channel=70), _SPARSE, 60)
 _register("sparse-2d", _sparse.solve_warp,
           "sparse-regularised TV-L1, MOD dictionary of joint [u; v] patches",
-          MemoryFactors(base=280, per_channel=45, fixed=8 * _MIB), _SPARSE, 60)
+          MemoryFactors(base=325, per_channel=55, fixed=3 * _MIB), _SPARSE, 60)
 # the same regularisers on tvl1's energy (grey L1 + gradient constancy, Huber-TV,
 # noise rule, weighted median, sharpness match); the ones above keep the book's
 _register("tvl1-tensor", _tensor.solve_warp, "tensor-directed TV-L1 on tvl1's energy",
-          MemoryFactors(base=200, per_channel=80), _TVL1 + _WMEDIAN, 40)
+          MemoryFactors(base=250), _TVL1 + _WMEDIAN, 40)
 _register("tvl1-sparse-dct", _sparse.solve_warp,
           "sparse-regularised TV-L1 on tvl1's energy, fixed overcomplete DCT dictionary",
-          MemoryFactors(base=275, per_channel=65, fixed=10 * _MIB), _SPARSE + _WMEDIAN, 65)
+          MemoryFactors(base=340, per_channel=5, fixed=7 * _MIB), _SPARSE + _WMEDIAN, 65)
 _register("tvl1-sparse-1d", _sparse.solve_warp,
           "sparse-regularised TV-L1 on tvl1's energy, MOD dictionary shared by u and v",
-          MemoryFactors(base=255, per_channel=55, fixed=16 * _MIB), _SPARSE + _WMEDIAN, 65)
+          MemoryFactors(base=335, per_channel=5, fixed=10 * _MIB), _SPARSE + _WMEDIAN, 65)
 _register("tvl1-sparse-2x1d", _sparse.solve_warp,
           "sparse-regularised TV-L1 on tvl1's energy, MOD dictionaries for u and for v",
-          MemoryFactors(base=250, per_channel=55, fixed=5 * _MIB), _SPARSE + _WMEDIAN, 65)
+          MemoryFactors(base=305, per_channel=15, fixed=2 * _MIB), _SPARSE + _WMEDIAN, 65)
 _register("tvl1-sparse-2d", _sparse.solve_warp,
           "sparse-regularised TV-L1 on tvl1's energy, MOD dictionary of joint [u; v] "
           "patches",
-          MemoryFactors(base=280, per_channel=45, fixed=8 * _MIB), _SPARSE + _WMEDIAN, 65)
+          MemoryFactors(base=360, fixed=5 * _MIB), _SPARSE + _WMEDIAN, 65)
 
 
 def get_method(name: str) -> Method:
