@@ -12,9 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .._validate import check_field as _check
-from ..parameters import Routed
 from ..registry import DEFAULT_METHOD, FLOW
-from ..twoframe.methods import resolve_flow_params
+from ..twoframe.methods import FlowComposed
 from ..twoframe.params import PRESETS, TVL1Params
 from ..twoframe.tvl1 import solve_warp as tvl1_solve_warp
 from .propagate import DEFAULT_REPAIR_COST, REPAIR_COSTS
@@ -40,7 +39,7 @@ TVL1_ENERGY = PRESETS["multiframe"]
 
 
 @dataclass(frozen=True)
-class MultiFrameParams(Routed):
+class MultiFrameParams(FlowComposed):
     """Fields shared by the multi-frame methods (RLR, MFSF), and their two-frame energy.
 
     The two-frame energy is composed: ``flow_method`` and ``flow_params`` are the
@@ -211,9 +210,6 @@ class MultiFrameParams(Routed):
     hidden_data_weight: float = 0.0
     relaxed_data: bool = True
 
-    _COMPOSED = ("flow_params",)
-    _DEPENDENT = {"flow_method": "flow_params"}
-
     @classmethod
     def default_flow_params(cls, flow_method: str) -> TVL1Params:
         """The energy of a ``flow_method`` named without ``flow_params``:
@@ -227,7 +223,7 @@ class MultiFrameParams(Routed):
         return defaults
 
     def __post_init__(self) -> None:
-        resolve_flow_params(self, type(self).default_flow_params)
+        super().__post_init__()
         _check(FLOW[self.flow_method].solve_warp is tvl1_solve_warp, "flow_method",
                f"the multi-frame U-step has TV-L1's energy (isotropic TV); "
                f"{self.flow_method!r} is not a TV-L1 method")

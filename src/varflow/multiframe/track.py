@@ -33,9 +33,8 @@ import numpy as np
 from .._validate import as_float_frames
 from .._validate import check_field as _check
 from ..ops.warp import warp_bicubic
-from ..parameters import Routed
 from ..registry import DEFAULT_METHOD, FLOW
-from ..twoframe.methods import resolve_flow_params, run_method
+from ..twoframe.methods import FlowComposed, run_method
 from ..twoframe.params import TVL1Params
 
 __all__ = [
@@ -57,7 +56,7 @@ TrackCallback = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
-class FlowTrackParams(Routed):
+class FlowTrackParams(FlowComposed):
     """Parameters of the trackers built on two-frame flows (``twoframe``, ``chain``).
 
     The two-frame method and its parameter object are fields, so any method of
@@ -79,16 +78,6 @@ class FlowTrackParams(Routed):
     flow_method: str = DEFAULT_METHOD
     flow_params: TVL1Params | None = None
 
-    _COMPOSED = ("flow_params",)
-    _DEPENDENT = {"flow_method": "flow_params"}
-
-    @classmethod
-    def default_flow_params(cls, flow_method: str) -> TVL1Params:
-        """The ``flow_params`` of a ``flow_method`` named without them: its defaults."""
-        return FLOW[flow_method].defaults()
-
-    def __post_init__(self) -> None:
-        resolve_flow_params(self, type(self).default_flow_params)
 
 
 #: The former names of :class:`FlowTrackParams` for each tracker.

@@ -23,10 +23,9 @@ from typing import Any
 import numpy as np
 
 from .._validate import check_field
-from ..parameters import Routed
-from ..registry import DEFAULT_METHOD, FLOW, INTERPOLATE, Interpolator
+from ..registry import DEFAULT_METHOD, INTERPOLATE, Interpolator
 from ..twoframe.coarse_to_fine import ProgressCallback
-from ..twoframe.methods import resolve_flow_params
+from ..twoframe.methods import FlowComposed
 from ..twoframe.params import TVL1Params
 from .motion import FlowCache, PairMotion, bidirectional_flows
 from .splatting import SplatParams, prepare_splat, splat_fast_defaults
@@ -48,7 +47,7 @@ __all__ = [
 
 
 @dataclass(frozen=True)
-class NaiveParams(Routed):
+class NaiveParams(FlowComposed):
     """Parameters of ``naive``: the simple way to interpolate with varflow's flow.
 
     The default :func:`varflow.flow` both ways, the flows at time t approximated
@@ -67,17 +66,6 @@ class NaiveParams(Routed):
 
     flow_method: str = DEFAULT_METHOD
     flow_params: TVL1Params | None = None
-
-    _COMPOSED = ("flow_params",)
-    _DEPENDENT = {"flow_method": "flow_params"}
-
-    @classmethod
-    def default_flow_params(cls, flow_method: str) -> TVL1Params:
-        """The ``flow_params`` of a ``flow_method`` named without them: its defaults."""
-        return FLOW[flow_method].defaults()
-
-    def __post_init__(self) -> None:
-        resolve_flow_params(self, type(self).default_flow_params)
 
 
 class _NaiveMotion(PairMotion):

@@ -67,10 +67,9 @@ from ..ops.occlusion import hidden_mask, photometric_error
 from ..ops.pyramid import smooth_image_fast
 from ..ops.splat import fill_holes, splat_trajectories
 from ..ops.warp import warp_bicubic, warp_bilinear
-from ..parameters import Routed
 from ..registry import FLOW
 from ..twoframe.coarse_to_fine import ProgressCallback
-from ..twoframe.methods import resolve_flow_params
+from ..twoframe.methods import FlowComposed
 from ..twoframe.params import TVL1Params
 from .motion import FlowCache, PairMotion, pair_flows
 
@@ -83,7 +82,7 @@ SAMPLINGS = ("bicubic", "bilinear")
 
 
 @dataclass(frozen=True)
-class SplatParams(Routed):
+class SplatParams(FlowComposed):
     """Parameters of ``splat`` (see :mod:`varflow.retime.splatting`).
 
     Attributes
@@ -144,9 +143,6 @@ class SplatParams(Routed):
     fallback_blur: float = 2.0
     quadratic: bool = True
 
-    _COMPOSED = ("flow_params",)
-    _DEPENDENT = {"flow_method": "flow_params"}
-
     @classmethod
     def default_flow_params(cls, flow_method: str) -> TVL1Params:
         """The method's defaults; for ``tvl1-ld`` with ``match_scale`` 0.5,
@@ -158,7 +154,7 @@ class SplatParams(Routed):
         return defaults
 
     def __post_init__(self) -> None:
-        resolve_flow_params(self, type(self).default_flow_params)
+        super().__post_init__()
         for name in ("splat_sharpness", "occlusion_cost", "fb_tolerance", "fb_relative",
                      "fallback_blur"):
             v = getattr(self, name)

@@ -6,8 +6,8 @@ its single-level warp solver (plugged into
 :func:`varflow.twoframe.coarse_to_fine.coarse_to_fine`), a one-line description, its
 memory model and kernels and, for a method with stages around the driver
 (``tvl1-ld``), the function that runs it.  :func:`run_method` runs one, as
-:func:`varflow.flow` does; :func:`resolve_flow_params` serves the parameter classes
-of the methods built on a two-frame method (trackers, interpolators).
+:func:`varflow.flow` does; :class:`FlowComposed` serves the parameter classes of the
+methods built on a two-frame method (trackers, interpolators).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .._validate import check_field
+from ..parameters import Routed
 from ..registry import DEFAULT_METHOD, FLOW, MemoryFactors, Method
 from . import large_displacement as _ld
 from . import sparse as _sparse
@@ -26,7 +27,7 @@ from .coarse_to_fine import ProgressCallback, coarse_to_fine
 from .params import PRESETS, TVL1Params
 
 __all__ = ["DEFAULT_METHOD", "Method", "METHODS", "FlowChoice", "get_method", "run_method",
-           "resolve_flow_params"]
+           "FlowComposed"]
 
 METHODS = FLOW
 
@@ -107,27 +108,41 @@ class FlowChoice(Protocol):
     flow_params: TVL1Params
 
 
-def resolve_flow_params(owner: Any, default_flow_params: Any) -> None:
-    """Check and complete the two-frame choice of a parameter object, in its
-    ``__post_init__``: ``owner.flow_method`` must name a method of :data:`FLOW`;
-    ``owner.flow_params`` None becomes ``default_flow_params(flow_method)``; the
-    result must suit the method (its preset's terms).
+class FlowComposed(Routed):
+    """Mixin of a parameter dataclass built on a two-frame method, which declares the
+    fields ``flow_method`` (a name of :data:`FLOW`) and ``flow_params``.
 
-    Raises
-    ------
-    ValueError
-        Naming ``flow_method`` or ``flow_params``.
+    ``flow_params`` is composed (flat names of the energy are routed to it); a new
+    ``flow_method`` without ``flow_params`` starts from :meth:`default_flow_params`;
+    ``__post_init__`` fills ``flow_params`` None with those defaults and checks that it
+    suits the method (its preset's terms), raising ``ValueError`` naming
+    ``flow_method`` or ``flow_params``.  A subclass with checks of its own calls
+    ``super().__post_init__()`` first.
     """
-    method = FLOW.get(owner.flow_method) if isinstance(owner.flow_method, str) else None
-    check_field(method is not None, "flow_method",
-                f"unknown two-frame method {owner.flow_method!r}; available: "
-                f"{', '.join(FLOW.names())}")
-    if owner.flow_params is None:
-        object.__setattr__(owner, "flow_params", default_flow_params(owner.flow_method))
-    try:
-        method.check_params(owner.flow_params)
-    except ValueError as exc:
-        raise ValueError(f"flow_params: {str(exc).removeprefix('params: ')}") from None
+
+    __slots__ = ()
+
+    _COMPOSED = ("flow_params",)
+    _DEPENDENT = {"flow_method": "flow_params"}
+
+    @classmethod
+    def default_flow_params(cls, flow_method: str) -> TVL1Params:
+        """The ``flow_params`` of a ``flow_method`` named without them: its defaults (a
+        class may choose others)."""
+        return FLOW[flow_method].defaults()
+
+    def __post_init__(self) -> None:
+        method = FLOW.get(self.flow_method) if isinstance(self.flow_method, str) else None
+        check_field(method is not None, "flow_method",
+                    f"unknown two-frame method {self.flow_method!r}; available: "
+                    f"{', '.join(FLOW.names())}")
+        if self.flow_params is None:
+            object.__setattr__(self, "flow_params",
+                               type(self).default_flow_params(self.flow_method))
+        try:
+            method.check_params(self.flow_params)
+        except ValueError as exc:
+            raise ValueError(f"flow_params: {str(exc).removeprefix('params: ')}") from None
 
 
 def run_method(

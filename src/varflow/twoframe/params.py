@@ -662,6 +662,7 @@ _PLAIN = dict(data_weight=40.0, max_iterations=50, edge_weight=50.0, gradient_we
               huber=0.0, noise_reference=0.0, texture_alpha=0.65, sharpness_match=False,
               grey=False, weighted_median_radius=0, weighted_median_levels=0, n_warps=5)
 _BASE = TVL1Params()
+_FAST = TVL1Params(scale_factor=0.5, n_warps=3)
 _PLAIN_P = TVL1Params(**_PLAIN)
 _TENSOR_TVL1 = TensorTerm(tensor_a=FULL_ENERGY_TENSOR_A)
 _SPARSE_LAYOUTS = {"dct": dict(dictionary="dct"), "1d": dict(layout="1D"),
@@ -677,10 +678,10 @@ _SPARSE_LAYOUTS = {"dct": dict(dictionary="dct"), "1d": dict(layout="1D"),
 PRESETS: dict[str, TVL1Params] = {
     "tvl1": _BASE,
     "plain": _PLAIN_P,
-    "fast": TVL1Params(scale_factor=0.5, n_warps=3),
+    "fast": _FAST,
     "multiframe": TVL1Params(max_iterations=50, n_warps=5, weighted_median_levels=0,
                              sharpness_match=False),
-    "tvl1-fast": TVL1Params(scale_factor=0.5, n_warps=3),
+    "tvl1-fast": _FAST,
     "tvl1-ld": TVL1Params(n_warps=3, weighted_median_levels=0, max_iterations=30,
                           matching=MatchingTerm()),
     "tensor": TVL1Params(**{**_PLAIN, "edge_weight": 0.0}, tensor=TensorTerm()),
