@@ -29,7 +29,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["as_float_frames", "as_float_image", "check_field", "check_flow", "check_pair"]
+__all__ = [
+    "as_float_frames",
+    "as_float_image",
+    "check_field",
+    "check_flow",
+    "check_pair",
+    "match_channels",
+]
 
 #: Float frames within ``[-_FLOAT_TOL, 1 + _FLOAT_TOL]`` are taken as already in [0, 1].
 _FLOAT_TOL = 1e-3
@@ -189,10 +196,57 @@ def check_pair(frame0: np.ndarray, frame1: np.ndarray) -> tuple[np.ndarray, np.n
         If a frame is invalid (named ``frame0`` / ``frame1``) or the frames differ
         in shape.
     """
-    a, b = as_float_frames([frame0, frame1], ["frame0", "frame1"])
-    if a.shape != b.shape:
-        raise ValueError(f"frame0 and frame1 differ in shape: {a.shape} vs {b.shape}")
+    a, b = match_channels(as_float_frames([frame0, frame1], ["frame0", "frame1"]),
+                          [np.shape(frame0), np.shape(frame1)], ["frame0", "frame1"])
     return a, b
+
+
+def match_channels(
+    frames: Sequence[np.ndarray], shapes: Sequence[tuple[int, ...]], names: Sequence[str]
+) -> list[np.ndarray]:
+    """Give the grey frames of a call the channel count of its colour frames.
+
+    A grey frame next to colour ones (a ``(H, W)`` scan beside an RGB photo) is
+    repeated over the channels: ``(g, g, g)`` has the grey value ``g`` under every
+    colour-to-grey weighting that sums to 1, so a grey data term sees the same
+    image and a colour one sees a colourless frame.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray, each (H, W, C) float32
+        From :func:`as_float_frames`.
+    shapes : sequence of tuple
+        The shapes the caller passed, named in the error message.
+    names : sequence of str
+        One name per frame.
+
+    Returns
+    -------
+    list of ndarray, each (H, W, C) with one C
+
+    Raises
+    ------
+    ValueError
+        If the frames differ in height or width, or hold two different channel
+        counts besides 1 (``"frame0 and frame1 differ in shape: (H, W, 3) vs (H, W, 4)"``,
+        with the shapes as passed).
+    """
+    out = list(frames)
+    for i, f in enumerate(out[1:], 1):
+        if f.shape[:2] != out[0].shape[:2]:
+            raise ValueError(f"{names[0]} and {names[i]} differ in shape: "
+                             f"{tuple(shapes[0])} vs {tuple(shapes[i])}")
+    colour = [i for i, f in enumerate(out) if f.shape[2] != 1]
+    for i in colour[1:]:
+        if out[i].shape[2] != out[colour[0]].shape[2]:
+            k = colour[0]
+            raise ValueError(f"{names[k]} and {names[i]} differ in shape: "
+                             f"{tuple(shapes[k])} vs {tuple(shapes[i])}")
+    if colour:
+        c = out[colour[0]].shape[2]
+        out = [np.ascontiguousarray(np.repeat(f, c, axis=2)) if f.shape[2] == 1 else f
+               for f in out]
+    return out
 
 
 def check_flow(flow: np.ndarray, name: str = "flow", allow_nan: bool = True) -> np.ndarray:

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_float_frames
+from .._validate import as_float_frames, match_channels
 from .._validate import check_field as _check
 from ..ops.warp import warp_bicubic
 from ..registry import DEFAULT_METHOD, FLOW
@@ -122,10 +122,8 @@ def check_frames(frames: Any) -> np.ndarray:
             raise ValueError("frames: expected a sequence of images or an array") from None
     if len(seq) < 2:
         raise ValueError(f"frames: need at least 2 frames, got {len(seq)}")
-    out = as_float_frames(seq, [f"frame {i}" for i in range(len(seq))])
-    for i, f in enumerate(out):
-        if f.shape != out[0].shape:
-            raise ValueError(f"frame {i}: shape {f.shape} differs from frame 0 {out[0].shape}")
+    names = [f"frame {i}" for i in range(len(seq))]
+    out = match_channels(as_float_frames(seq, names), [np.shape(f) for f in seq], names)
     return np.stack(out)
 
 
