@@ -164,8 +164,42 @@ def test_flow_dispatch(tmp_path):
         write_flow(path, f)
         assert path.read_bytes()[:4] == magic
         np.testing.assert_array_equal(read_flow(path), f)
-    with pytest.raises(ValueError, match="unknown flow file extension"):
-        write_flow(tmp_path / "d.npy", f)
+    with pytest.raises(ValueError, match=r"unknown flow file extension '\.npz' \(use \.flo, "):
+        write_flow(tmp_path / "d.npz", f)
     with pytest.raises(ValueError, match="unknown flow file extension"):
         read_flow(tmp_path / "a.txt")
-    assert not (tmp_path / "d.npy").exists()
+    assert not (tmp_path / "d.npz").exists()
+
+
+def test_npy_flow_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(3)
+    f = rng.normal(0, 5, (5, 7, 2)).astype(np.float32)
+    f[2, 3] = np.nan
+    path = tmp_path / "f.npy"
+    write_flow(path, f)
+    back = read_flow(path)
+    assert back.dtype == np.float32 and back.shape == f.shape
+    assert back.tobytes() == f.tobytes()  # NaN included, bit for bit
+    np.testing.assert_array_equal(np.load(path), f)  # plain NumPy reads it
+    np.save(tmp_path / "f64.npy", f.astype(np.float64))
+    np.testing.assert_array_equal(read_flow(tmp_path / "f64.npy"), f)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros((4, 5), np.float32), r"shape \(H, W, 2\)"),
+    (np.zeros((4, 5, 2), np.int16), "floating point"),
+    (np.array([{"a": 1}], dtype=object), "not a NumPy .npy array"),
+])
+def test_npy_flow_bad_arrays(tmp_path, bad, message):
+    from varflow.io.flo import FlowFormatError
+
+    path = tmp_path / "bad.npy"
+    np.save(path, bad, allow_pickle=True)
+    with pytest.raises(FlowFormatError, match=message):
+        read_flow(path)
+    (tmp_path / "junk.npy").write_bytes(b"not numpy at all")
+    with pytest.raises(FlowFormatError, match="not a NumPy .npy array"):
+        read_flow(tmp_path / "junk.npy")
+    with pytest.raises(ValueError, match="floating-point"):
+        write_flow(tmp_path / "out.npy", np.zeros((3, 3, 2), np.int32))
+    assert not (tmp_path / "out.npy").exists()

@@ -24,6 +24,7 @@ from PIL import Image, UnidentifiedImageError
 from ._atomic import atomic_write
 from .flo import read_flo, write_flo
 from .kitti_png import PNG_SIGNATURE, decode_png16, encode_png16, read_kitti_png, write_kitti_png
+from .npy import read_npy_flow, write_npy_flow
 
 __all__ = ["read_image", "write_image", "read_flow", "write_flow"]
 
@@ -104,13 +105,25 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     Returns
     -------
     ndarray
-        ``(H, W)`` for grey images, ``(H, W, 3)`` for colour; ``uint8`` for 8-bit
-        files and ``uint16`` for 16-bit files (16-bit PNGs, grey or colour, are
-        decoded at full precision); ``float32`` for 32-bit floating-point grey
-        files (TIFF mode ``F``; any range, NaN kept -- see
-        :mod:`varflow._validate` for how flow scales them).  RGBA drops alpha,
-        palette images are expanded to RGB, LA drops alpha to L, 1-bit images
-        become ``uint8`` 0/255.
+        ``(H, W)`` for grey images (no channel axis), ``(H, W, 3)`` for colour in
+        **RGB** channel order (as Pillow, scikit-image and matplotlib; OpenCV's
+        ``cv2.imread`` gives BGR).  The dtype of the file is kept, values are not
+        rescaled: ``uint8`` for 8-bit files and ``uint16`` for 16-bit files
+        (16-bit PNGs, grey or colour, are decoded at full precision); ``float32``
+        for 32-bit floating-point grey files (TIFF mode ``F``; any range, NaN kept
+        -- see :mod:`varflow._validate` for how flow scales them).  RGBA drops
+        alpha, palette images are expanded to RGB, LA drops alpha to L, 1-bit
+        images become ``uint8`` 0/255.
+
+    Notes
+    -----
+    To hand a colour image to OpenCV functions that expect BGR (``cv2.imwrite``,
+    ``cv2.imshow``, colour conversions), convert it:
+    ``cv2.cvtColor(img, cv2.COLOR_RGB2BGR)`` (and ``cv2.COLOR_BGR2RGB`` for the way
+    back, e.g. from ``cv2.imread`` to :func:`varflow.flow`).  Grey ``(H, W)`` arrays
+    need no conversion.  The flow itself does not depend on the channel order
+    (the default ``tvl1`` averages the channels), but mixing an RGB and a BGR frame
+    in one call does.
 
     Raises
     ------
@@ -220,15 +233,18 @@ def write_image(path: str | os.PathLike[str], array: np.ndarray) -> None:
     logger.debug("wrote %s", path)
 
 
-_FLOW_READERS = {".flo": read_flo, ".png": read_kitti_png}
-_FLOW_WRITERS = {".flo": write_flo, ".png": write_kitti_png}
+_FLOW_READERS = {".flo": read_flo, ".png": read_kitti_png, ".npy": read_npy_flow}
+_FLOW_WRITERS = {".flo": write_flo, ".png": write_kitti_png, ".npy": write_npy_flow}
+#: The flow file extensions read and written, as error messages list them.
+FLOW_EXTENSIONS = tuple(_FLOW_READERS)
 
 
 def read_flow(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a flow file, choosing the format from the extension.
 
     ``.flo`` -> :func:`~varflow.io.flo.read_flo` (Middlebury),
-    ``.png`` -> :func:`~varflow.io.kitti_png.read_kitti_png` (KITTI).
+    ``.png`` -> :func:`~varflow.io.kitti_png.read_kitti_png` (KITTI 16-bit PNG),
+    ``.npy`` -> :func:`~varflow.io.npy.read_npy_flow` (the NumPy array).
 
     Returns
     -------
@@ -245,7 +261,8 @@ def read_flow(path: str | os.PathLike[str]) -> np.ndarray:
     path = Path(os.fspath(path))
     reader = _FLOW_READERS.get(path.suffix.lower())
     if reader is None:
-        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} (use .flo or .png)")
+        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} "
+                         "(use .flo, .png or .npy)")
     return reader(path)
 
 
@@ -253,7 +270,10 @@ def write_flow(path: str | os.PathLike[str], flow: np.ndarray) -> None:
     """Write a flow file atomically, choosing the format from the extension.
 
     ``.flo`` -> :func:`~varflow.io.flo.write_flo`,
-    ``.png`` -> :func:`~varflow.io.kitti_png.write_kitti_png`.
+    ``.png`` -> :func:`~varflow.io.kitti_png.write_kitti_png` (a 16-bit PNG that
+    image viewers show as a nearly flat picture: use
+    :func:`~varflow.viz.flow_to_color` for a picture),
+    ``.npy`` -> :func:`~varflow.io.npy.write_npy_flow`.
 
     Raises
     ------
@@ -263,5 +283,6 @@ def write_flow(path: str | os.PathLike[str], flow: np.ndarray) -> None:
     path = Path(os.fspath(path))
     writer = _FLOW_WRITERS.get(path.suffix.lower())
     if writer is None:
-        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} (use .flo or .png)")
+        raise ValueError(f"{path}: unknown flow file extension {path.suffix!r} "
+                         "(use .flo, .png or .npy)")
     writer(path, flow)

@@ -231,6 +231,21 @@ def decode_png16(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> np.nd
     return out.view(">u2").astype(np.uint16).reshape(height, width, channels)
 
 
+def _read_bytes(path: Path) -> bytes:
+    if not path.exists():
+        raise FileNotFoundError(2, "flow file not found", str(path))
+    if path.is_dir():
+        raise IsADirectoryError(21, "is a folder, not a flow file", str(path))
+    return path.read_bytes()
+
+
+def _png_kind(data: bytes) -> tuple[int, int] | None:
+    """``(bit depth, colour type)`` from a PNG's IHDR; None if the bytes are not one."""
+    if len(data) < 33 or data[:8] != PNG_SIGNATURE or data[12:16] != b"IHDR":
+        return None
+    return data[24], data[25]
+
+
 def read_png16(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a 16-bit PNG file with :func:`decode_png16`.
 
@@ -280,11 +295,17 @@ def read_kitti_png(path: str | os.PathLike[str]) -> np.ndarray:
     (KITTI 2015 development kit).
     """
     path = Path(os.fspath(path))
-    rgb = read_png16(path)
-    if rgb.shape[2] != 3:
+    data = _read_bytes(path)
+    kind = _png_kind(data)
+    if kind is not None and kind != (16, 2):
+        depth, colour = kind
+        channels = {0: "grey", 2: "RGB", 3: "palette", 4: "grey+alpha", 6: "RGBA"}.get(
+            colour, f"colour type {colour}")
         raise FlowFormatError(
-            f"{path}: KITTI flow PNG must be 16-bit RGB, got {rgb.shape[2]} channel(s)"
+            f"{path}: not a KITTI flow PNG ({depth}-bit {channels}, a picture?); a KITTI flow "
+            "PNG is 16-bit RGB with R = u, G = v, B = valid"
         )
+    rgb = decode_png16(data, path)
     flow = (rgb[..., :2].astype(np.float32) - np.float32(_KITTI_OFFSET)) / np.float32(_KITTI_SCALE)
     flow[rgb[..., 2] == 0] = np.nan
     logger.debug("read %s: %d x %d KITTI flow", path, rgb.shape[1], rgb.shape[0])
