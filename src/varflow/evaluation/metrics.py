@@ -258,8 +258,9 @@ def evaluate(
         ``"r5"`` (percent of pixels with EPE above 1, 3, 5 px), ``"missing"``
         (percent of valid ground-truth pixels where the estimate is NaN or
         unknown; they are excluded from the other measures) and, with
-        ``occlusion``, ``"aee_noc"`` and ``"aee_occ"``.  Averages over an empty
-        set are NaN.
+        ``occlusion``, ``"aee_noc"`` and ``"aee_occ"``.  Every value is a plain
+        Python ``float``, not a NumPy scalar (the dict prints as
+        ``{'aee': 0.25, ...}``, not ``np.float64(0.25)``).  Averages over an empty set are NaN.
     """
     e, g, used, missing = _prepare(est, gt, mask)
     occ = _as_mask(occlusion, e.shape[:2], "occlusion")
@@ -272,7 +273,7 @@ def evaluate(
         "r1": 100.0 * _mean(epe > 1.0, "evaluate: r1"),
         "r3": 100.0 * _mean(epe > 3.0, "evaluate: r3"),
         "r5": 100.0 * _mean(epe > 5.0, "evaluate: r5"),
-        "missing": 100.0 * missing.sum() / n_valid if n_valid else float("nan"),
+        "missing": 100.0 * float(missing.sum()) / n_valid if n_valid else float("nan"),
     }
     if result["missing"] > 0:
         logger.warning(
@@ -283,7 +284,7 @@ def evaluate(
         full = _epe(e, g)
         result["aee_noc"] = _mean(full[used & ~occ], "evaluate: aee_noc")
         result["aee_occ"] = _mean(full[used & occ], "evaluate: aee_occ")
-    return result
+    return {key: float(value) for key, value in result.items()}
 
 
 def photometric_residual_map(
