@@ -233,7 +233,7 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
     entries = [*registry.METHODS.items(), *registry.TRACKERS.items(), *INTERPOLATORS.items()]
     assert len(lines) == len(entries)
     for line, (name, m) in zip(lines, entries, strict=True):
-        assert line.split()[0] == name and m.description in line
+        assert line.split()[0] == name and m.use and m.use in line  # when to use it
     rc, out, _ = run(capsys, "methods", "--params", "--markdown")
     assert rc == 0
     default = registry.FLOW["tvl1"].defaults().data_weight
@@ -242,11 +242,16 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_help_lists_generated_parameter_flags(capsys: pytest.CaptureFixture[str]) -> None:
+    """Every field is a flag: the knobs in ``--help``, all of them in ``methods NAME``."""
     rc, out, _ = run(capsys, "flow", "--help")
     assert rc == 0
-    for name, _, _ in registry.parameter_fields(registry.FLOW["tvl1"]):
+    for name, _ in registry.FLOW["tvl1"].knobs:
         assert "--" + name.replace("_", "-") in out
-    assert "--no-structure-texture" in out
+    assert "--no-grey" in out
+    rc, out, _ = run(capsys, "methods", "tvl1")
+    assert rc == 0
+    for name, _, _ in registry.parameter_fields(registry.FLOW["tvl1"]):
+        assert "--" + name.replace("_", "-") + " " in out
 
 
 # ----------------------------------------------------------------------------- errors

@@ -112,6 +112,13 @@ class Entry:
         those every method compiles), to tell whether Numba's cache holds them.
     compile_seconds : int or None
         Rough seconds its first run spends compiling on a cold cache.
+    use : str
+        When to choose it, one line (``varflow methods``, ``--help``): the scenes or
+        jobs it is for, against the other methods of its kind.
+    knobs : tuple of (str, str)
+        ``(field, when to change it)`` of the few parameters worth turning, in the
+        order ``--help`` shows them; every other field keeps its default for most
+        users.
     """
 
     name: str
@@ -120,6 +127,8 @@ class Entry:
     memory: MemoryFactors | None = None
     kernels: tuple[str, ...] = ()
     compile_seconds: int | None = None
+    use: str = ""
+    knobs: tuple[tuple[str, str], ...] = ()
 
     @property
     def params_type(self) -> type:
@@ -219,12 +228,15 @@ class Registry(MutableMapping):
         The :class:`Entry` subclass of its entries.
     source : str
         The module that registers the entries, imported on the first lookup.
+    default : str
+        The entry used when none is named (``--method`` omitted).
     """
 
-    def __init__(self, kind: str, entry_type: type[Entry], source: str) -> None:
+    def __init__(self, kind: str, entry_type: type[Entry], source: str, default: str) -> None:
         self.kind = kind
         self.entry_type = entry_type
         self.source = source
+        self.default = default
         self._entries: dict[str, Entry] = {}
         self._loaded = False
 
@@ -339,11 +351,12 @@ class Registry(MutableMapping):
 
 
 #: The two-frame flow methods (:func:`varflow.flow`).
-FLOW = Registry("method", Method, "varflow.twoframe.methods")
+FLOW = Registry("method", Method, "varflow.twoframe.methods", DEFAULT_METHOD)
 #: The trajectory methods (:func:`varflow.track`).
-TRACK = Registry("trajectory method", Tracker, "varflow.multiframe.methods")
+TRACK = Registry("trajectory method", Tracker, "varflow.multiframe.methods", "rlr")
 #: The frame-interpolation methods (:func:`varflow.interpolate`).
-INTERPOLATE = Registry("interpolation method", Interpolator, "varflow.retime.methods")
+INTERPOLATE = Registry("interpolation method", Interpolator, "varflow.retime.methods",
+                       "splat")
 
 METHODS = FLOW
 TRACKERS = TRACK

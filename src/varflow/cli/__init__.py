@@ -40,7 +40,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from .._version import __version__
-from ._common import PROG, _fail, _one_line, _Parser, parameter_table
+from ._common import PROG, _fail, _one_line, _Parser, _reset_claims, parameter_table
 from .flow import DEMO_MAGNITUDE, DEMO_SEED, DEMO_SHAPE
 
 __all__ = ["build_parser", "main", "parameter_table"]
@@ -99,6 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler: logging.Handler | None = None
     pkg_log = logging.getLogger("varflow")
     old_level = pkg_log.level
+    _reset_claims()
     try:
         try:
             argv = list(sys.argv[1:] if argv is None else argv)

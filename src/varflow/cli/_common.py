@@ -13,6 +13,7 @@ import logging
 import math
 import re
 import sys
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -21,7 +22,7 @@ import numpy as np
 
 from ..registry import METHODS, TRACKERS, get_method, parameter_fields
 
-__all__ = ["PROG", "parameter_rows", "parameter_table"]
+__all__ = ["PROG", "method_card", "methods_epilog", "parameter_rows", "parameter_table"]
 
 log = logging.getLogger("varflow.cli")
 
@@ -41,7 +42,29 @@ class MissingExtraError(_CommandError):
     """A command needs packages of an optional extra that are not installed."""
 
 
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, except that text already laid out in lines (a list of
+    methods, each line indented) keeps its lines, each wrapped with a hanging indent."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n  " not in text:
+            return super()._fill_text(text, width, indent)
+        out = []
+        for line in text.splitlines():
+            body = line.lstrip(" ")
+            hang = len(line) - len(body)
+            m = re.match(r"(\S+\s{2,})", body) if hang else None
+            sub = " " * (hang + (len(m.group(1)) if m else 2))
+            out.append(textwrap.fill(body, width, initial_indent=indent + " " * hang,
+                                     subsequent_indent=indent + sub) if body else "")
+        return "\n".join(out)
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str) -> NoReturn:  # one line instead of usage + message
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
@@ -74,7 +97,8 @@ def _field_docs(cls: type) -> dict[str, _FieldDoc]:
     Returns ``{field: _FieldDoc(name, symbol, meaning)}``; ``symbol`` is the paper
     symbol when the description starts with one (``"λ, weight of ..."`` or
     ``"c of the ..."``), and ``meaning`` drops "Default ..." sentences (the default
-    is taken from the dataclass itself).
+    is taken from the dataclass itself, the reasons belong to the docs) and those
+    pointing to the benchmarks' history.
     """
     out: dict[str, _FieldDoc] = {}
     for klass in reversed(cls.__mro__):
@@ -102,7 +126,8 @@ def _field_docs(cls: type) -> dict[str, _FieldDoc]:
                 buf[current].append(stripped)
         for name, parts in buf.items():
             sentences = re.split(r"(?<=\.)\s+", " ".join(parts))
-            text = " ".join(t for t in sentences if t and not t.startswith("Default")).strip()
+            text = " ".join(t for t in sentences if t and not t.startswith("Default")
+                            and "benchmarks/" not in t).strip()  # no history in help
             sym = ""
             m = _SYMBOL.match(text)
             if m:
@@ -121,14 +146,15 @@ _LITERAL = re.compile(r"``([^`]+)``")
 def plain_text(text: str, markdown: bool = False) -> str:
     """A docstring fragment without its reStructuredText markup, for the terminal.
 
-    ``:func:`~varflow.ops.fusion.repair``` becomes ``repair`` (the last component,
-    as Sphinx shows ``~``) and ``:mod:`varflow.multiframe.propagate``` its full
-    name; literals lose their double backticks.  With ``markdown`` both become
-    Markdown code spans.
+    A cross-reference becomes the last component of its target
+    (``:func:`~varflow.ops.fusion.repair``` and ``:func:`varflow.ops.fusion.repair```
+    both ``repair``: help names no module paths); literals lose their double
+    backticks.  With ``markdown`` both become Markdown code spans.
     """
     def role(m: re.Match) -> str:
-        target = m.group(2).strip()
-        name = target.rsplit(".", 1)[-1] if m.group(1) else target
+        name = m.group(2).strip()
+        if "<" not in m.group(0):  # no explicit title: the target's last component
+            name = name.rsplit(".", 1)[-1]
         return f"`{name}`" if markdown else name
 
     text = _ROLE.sub(role, text)
@@ -244,49 +270,71 @@ def _defaults_text(p: _Param, methods: Sequence[str], registry: Mapping[str, Any
     return text
 
 
+def _knobs(methods: Sequence[str], registry: Mapping[str, Any]) -> dict[str, str]:
+    """``{field: when to change it}`` of the knobs of ``methods``, first mention wins."""
+    out: dict[str, str] = {}
+    for m in methods:
+        for name, hint in registry[m].knobs:
+            out.setdefault(name, hint)
+    return out
+
+
 def _add_param_flags(
     parser: argparse.ArgumentParser,
     params: dict[str, _Param],
     registry: Mapping[str, Any] = METHODS,
     chosen: Sequence[str] | None = None,
 ) -> None:
-    """Add one flag per parameter field; the help states the defaults.
+    """Add one flag per parameter field; ``--help`` shows the knobs that matter.
+
+    Every field of every method of ``registry`` is accepted as ``--field-name``;
+    the help lists only the knobs (:attr:`~varflow.registry.Entry.knobs`) of the
+    ``chosen`` methods (of the registry's default method when none is chosen),
+    each with when to change it and its default, and points to ``varflow methods
+    NAME`` for the full table.
 
     Parameters
     ----------
     parser : ArgumentParser
     params : dict
         From :func:`_collect_params` of ``registry``.
-    registry : mapping
-        :data:`~varflow.registry.METHODS` or :data:`~varflow.registry.TRACKERS`.
+    registry : Registry
+        :data:`~varflow.registry.METHODS`, :data:`~varflow.registry.TRACKERS` or
+        :data:`~varflow.registry.INTERPOLATORS`.
     chosen : sequence of str, optional
-        Methods named on the command line (:func:`chosen_methods`): the help gives
-        their defaults and hides the flags none of them has.  Without it, every
-        method's default where they differ.
+        Methods named on the command line (:func:`chosen_methods`).
     """
-    methods = list(chosen) if chosen else list(registry)
-    if chosen:
-        which = _method_names(methods, registry)
-        description = (f"Fields of the parameter dataclass of {which}, with its defaults; "
-                       "only the flags you give are changed.")
-    else:
-        description = ("Fields of the methods' parameter dataclasses; only the flags you give "
-                       "are changed.  Defaults per method where they differ (give --method "
-                       "NAME before --help for one method's).")
-    group = parser.add_argument_group("method parameters", description)
-    for p in params.values():
-        meaning = plain_text(p.doc.meaning) if p.doc else ""
-        sym = f" [{p.doc.symbol}]" if p.doc and p.doc.symbol else ""
-        if any(m in p.defaults for m in methods):
-            text = f"{meaning}{sym} ({_defaults_text(p, methods, registry)})".replace("%", "%%")
-        else:
-            text = argparse.SUPPRESS  # not a field of the chosen methods
+    methods = list(chosen) if chosen else [getattr(registry, "default", next(iter(registry)))]
+    knobs = _knobs(methods, registry)
+    which = _method_names(methods, registry)
+    first = methods[0]
+    description = (f"The parameters worth changing for {which}; every other parameter is a "
+                   f"flag too (--field-name VALUE), listed by 'varflow methods {first}'. "
+                   "Only the flags you give are changed.")
+    group = parser.add_argument_group(f"knobs of {which}", description)
+    order = [params[k] for k in knobs if k in params]
+    for p in order + [q for q in params.values() if q.name not in knobs]:
+        text: str = argparse.SUPPRESS
+        if p.name in knobs and any(m in p.defaults for m in methods):
+            sym = f"{p.doc.symbol}: " if p.doc and p.doc.symbol and not \
+                knobs[p.name].startswith(p.doc.symbol) else ""
+            text = f"{sym}{knobs[p.name]} ({_defaults_text(p, methods, registry)})"
+            text = text.replace("%", "%%")
         kwargs: dict[str, Any] = {"dest": _PARAM_PREFIX + p.name, "default": argparse.SUPPRESS,
                                   "help": text}
         if p.type is bool:
             group.add_argument(p.flag, action=argparse.BooleanOptionalAction, **kwargs)
         else:
             group.add_argument(p.flag, type=p.type, metavar=p.type.__name__.upper(), **kwargs)
+
+
+def methods_epilog(registry: Mapping[str, Any], option: str = "--method") -> str:
+    """The ``--help`` epilog: every method of ``registry`` with when to use it."""
+    width = max(len(n) for n in registry)
+    lines = [f"methods ({option} NAME; 'varflow methods NAME' lists its parameters):"]
+    for name, entry in registry.items():
+        lines.append(f"  {name:<{width}}  {entry.use or entry.description}")
+    return "\n".join(lines)
 
 
 def _given_params(args: argparse.Namespace) -> dict[str, Any]:
@@ -313,6 +361,66 @@ def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, An
     return given
 
 
+def _entry(method: str) -> Any:
+    """The registered entry named ``method``, of any kind (two-frame flow first)."""
+    from ..registry import INTERPOLATE
+
+    if method in TRACKERS:
+        return TRACKERS[method]
+    if method in INTERPOLATE:
+        return INTERPOLATE[method]
+    return get_method(method)
+
+
+_RANGE = re.compile(r"(?:must be|expected)\s+(?:a finite number |an integer |one of )?(.*?),"
+                    r" got ")
+
+
+def _field_range(entry: Any, name: str, default: Any) -> str:
+    """The values a field accepts, as its check states them (``"(0, 1)"``, ``">= 1"``).
+
+    Found by giving the method's parameter check a value no field accepts (NaN, or
+    an unknown word) and reading the range from its message, so the table and the
+    check cannot disagree; "" when the check takes any value.
+    """
+    from ..registry import FLOW, INTERPOLATE, TRACK
+
+    if isinstance(default, bool):
+        return "on/off"
+    registry = next(r for r in (FLOW, TRACK, INTERPOLATE) if r.get(entry.name) is entry)
+    probe: Any = "\x00?" if isinstance(default, str) else float("nan")
+    try:
+        registry.make_params(entry, **{name: probe})
+    except ValueError as exc:
+        text = str(exc)
+        if "unknown two-frame method" in text:
+            return "flow method"
+        m = _RANGE.search(text)
+        if m:
+            rng = m.group(1).replace("'", "").replace(" or an odd integer", ", odd")
+            return rng[3:] if rng.startswith("in ") else rng
+    return ""
+
+
+_UNITS = (  # (pattern in a field's description, unit shown), first match wins
+    (r"pixels per pixel", "px/px"),
+    (r"1/intensity units", "1/intensity"),
+    (r"1/pixel²", "1/px²"),
+    (r"\bpixels²", "px²"),
+    (r"intensity units", "intensity"),
+    (r"(?:,|\bin) pixels\b|\(pixels\)|\bpixels\.$", "px"),
+)
+
+
+def _field_units(meaning: str) -> str:
+    """The unit a field's description states in one of the usual phrasings ("" if none)."""
+    first = re.split(r"(?<=\.)\s", meaning, maxsplit=1)[0]
+    for pattern, unit in _UNITS:
+        if re.search(pattern, first):
+            return unit
+    return ""
+
+
 def parameter_rows(method: str) -> list[tuple[str, str, str, str]]:
     """The rows of a method's parameter table: ``(name, symbol, repr(default), meaning)``.
 
@@ -327,14 +435,7 @@ def parameter_rows(method: str) -> list[tuple[str, str, str, str]]:
         Every field :func:`varflow.registry.parameter_fields` gives, in its order;
         ``symbol`` the paper symbol of the field's docstring ("" when it has none).
     """
-    from ..retime.methods import INTERPOLATORS
-
-    if method in TRACKERS:
-        m = TRACKERS[method]
-    elif method in INTERPOLATORS:
-        m = INTERPOLATORS[method]
-    else:
-        m = get_method(method)
+    m = _entry(method)
     docs: dict[type, dict[str, _FieldDoc]] = {}
     rows = []
     for name, default, owner in parameter_fields(m):
@@ -374,6 +475,68 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     return "\n".join(
         f"  {n:<{wn}}  {s or '-':<{ws}}  {d:>{wd}}  {plain_text(t)}" for n, s, d, t in rows
     )
+
+
+def method_card(method: str, width: int | None = None) -> str:
+    """One method for the terminal: what it is for, then every parameter on one line.
+
+    The rows give the flag, the paper symbol, the default, the accepted range, the
+    unit and the first sentence of the description, cut to ``width`` columns (the
+    terminal's by default); the knobs (:attr:`~varflow.registry.Entry.knobs`)
+    come first, marked ``*``.
+
+    Parameters
+    ----------
+    method : str
+        A registered two-frame, trajectory or interpolation method name.
+    width : int, optional
+        Line width; the terminal's (``COLUMNS``), at least 80, by default.
+
+    Returns
+    -------
+    str
+    """
+    import shutil
+
+    m = _entry(method)
+    if width is None:
+        width = max(80, shutil.get_terminal_size((100, 24)).columns)
+    knobs = [k for k, _ in m.knobs]
+    rows = parameter_rows(method)
+    fields = parameter_fields(m)
+    defaults = {name: default for name, default, _ in fields}
+    flow_method = defaults.get("flow_method") if m.name not in METHODS else None
+    inherited: set[str] = set()
+    if isinstance(flow_method, str) and flow_method in METHODS:  # composes a flow method
+        inherited = {name for name, _, _ in parameter_fields(METHODS[flow_method])}
+        inherited -= set(knobs) | {name for name, _, owner in fields
+                                   if owner is type(m.defaults())}
+        rows = [r for r in rows if r[0] not in inherited]
+    rows.sort(key=lambda r: knobs.index(r[0]) if r[0] in knobs else len(knobs))
+    table = []
+    for name, sym, default, meaning in rows:
+        text = plain_text(meaning)
+        first = re.split(r"(?<=\.)\s", text, maxsplit=1)[0].rstrip(".")
+        first = re.sub(r"\s*\([^()]*\)", "", first)  # the gist, without the asides
+        table.append(("*" if name in knobs else " ", "--" + name.replace("_", "-"),
+                      sym or "-", default, _field_range(m, name, defaults[name]) or "any",
+                      _field_units(text) or "-", first))
+    head = ("", "flag", "symbol", "default", "range", "unit", "meaning")
+    cols = [max(len(r[k]) for r in [head, *table]) for k in range(6)]
+    lines = [f"{m.name}: {m.use}" if m.use else m.name,
+             textwrap.fill(f"How: {plain_text(m.description)}.", width),
+             f"* = the knobs worth changing; every flag goes after 'varflow COMMAND --method "
+             f"{m.name}'.", ""]
+    for r in [head, *table]:
+        line = (f"{r[0]} {r[1]:<{cols[1]}}  {r[2]:<{cols[2]}}  {r[3]:>{cols[3]}}  "
+                f"{r[4]:<{cols[4]}}  {r[5]:<{cols[5]}}  ")
+        rest = max(width - len(line), 30)  # a narrow terminal wraps rather than lose it
+        tail = r[6] if len(r[6]) <= rest else r[6][:rest - 1] + "…"
+        lines.append((line + tail).rstrip())
+    if inherited:
+        lines.append(f"  and the {len(inherited)} parameters of its flow method "
+                     f"(--flow-method, default {flow_method}): 'varflow methods {flow_method}'")
+    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -418,8 +581,38 @@ def _compile_notice(method: str, quiet: bool) -> None:
               flush=True)
 
 
+#: The files one command line reads and writes, ``{resolved path: option}``: two
+#: outputs (or an output and an input) on one file are refused before any work
+#: instead of the later write silently replacing the earlier.  Reset by ``main``.
+_CLAIMED: dict[Path, str] = {}
+
+
+def _reset_claims() -> None:
+    _CLAIMED.clear()
+
+
+def _claim(path: Path, what: str) -> None:
+    """Record ``path`` as the output of option ``what``; refuse a file already named."""
+    key = path.resolve()
+    other = _CLAIMED.get(key)
+    if other is not None:
+        raise ValueError(f"{what}: {path} is also {other}; give each output a file of its own")
+    _CLAIMED[key] = f"the {what} output"
+
+
+def _claim_inputs(*items: tuple[str | None, str]) -> None:
+    """Record input files (``(path, label)``) so that no output may replace them."""
+    for path, label in items:
+        if path is not None and Path(path).is_file():
+            _CLAIMED.setdefault(Path(path).resolve(), f"the input {label}")
+
+
 def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
-    """Fail before any work when an output cannot be written."""
+    """Fail before any work when an output cannot be written.
+
+    Also refuses an output path that another output or an input of the same
+    command line already names (:func:`_claim`).
+    """
     p = Path(path)
     if suffixes is not None and p.suffix.lower() not in suffixes:
         raise ValueError(f"{what}: {p} must end in {' or '.join(suffixes)}")
@@ -433,6 +626,7 @@ def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
         raise FileNotFoundError(2, f"{what}: directory does not exist", str(parent))
     if p.is_dir():
         raise IsADirectoryError(21, f"{what}: is a directory", str(p))
+    _claim(p, what)
     return p
 
 

@@ -2,12 +2,12 @@
 
 Synopsis::
 
-    varflow flow FRAME0 FRAME1 -o OUT.flo|OUT.png [--png COLOUR.png] [--method NAME]
-                 [--max-radius R] [--quiet] [--<parameter> VALUE ...]
+    varflow flow FRAME0 FRAME1 -o OUT.flo|OUT.npy|OUT.png [--png COLOUR.png] [--method NAME]
+                 [--max-pixels N] [--max-radius R] [--quiet] [--<parameter> VALUE ...]
     varflow show FLOW -o OUT.png [--max-radius R] [--legend]
     varflow eval EST GT [--occlusions MASK.png] [--json]
     varflow demo [-o DIR] [--quiet]
-    varflow methods [--params] [--markdown]
+    varflow methods [NAME] [--params] [--markdown]
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import argparse
 import json
 import logging
 import math
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,8 +26,10 @@ import numpy as np
 
 from ..registry import METHODS, TRACKERS, get_method, make_params
 from ._common import (
+    PROG,
     _add_param_flags,
     _check_output,
+    _claim_inputs,
     _collect_params,
     _compile_notice,
     _magnitude,
@@ -35,6 +38,9 @@ from ._common import (
     _Progress,
     _to_uint8,
     chosen_methods,
+    int_at_least,
+    method_card,
+    methods_epilog,
     parameter_table,
 )
 
@@ -50,15 +56,24 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     ``common`` and ``argv`` are).
     """
     params = _collect_params()
-    p = sub.add_parser("flow", parents=[common], help="estimate the flow between two frames",
-                       description="Estimate the flow from FRAME0 to FRAME1.")
-    p.add_argument("frame0", metavar="FRAME0", help="first image (PNG, JPEG, ...)")
-    p.add_argument("frame1", metavar="FRAME1", help="second image, same size")
+    p = sub.add_parser(
+        "flow", parents=[common], help="estimate the flow between two frames",
+        description="Estimate the flow from FRAME0 to FRAME1: FRAME1 at (x + u, y + v) "
+        "matches FRAME0 at (x, y).  Grey and colour frames mix.",
+        usage="%(prog)s FRAME0 FRAME1 -o OUT [--method NAME] [--PARAMETER VALUE ...] "
+        "[options]",
+        epilog=methods_epilog(METHODS))
+    p.add_argument("frame0", metavar="FRAME0", help="first image (PNG, JPEG, TIFF, ...)")
+    p.add_argument("frame1", metavar="FRAME1", help="second image, same size (grey or colour)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="flow file: .flo (Middlebury) or .png (KITTI 16-bit)")
+                   help="flow file: .flo (Middlebury), .npy (NumPy float32) or .png (KITTI "
+                   "16-bit, for programs, not viewers: use --png for a picture)")
     p.add_argument("--png", metavar="COLOUR.png", help="also write the colour-coded flow")
-    p.add_argument("--method", default="tvl1", metavar="NAME",
-                   help=f"one of: {', '.join(METHODS)} (default tvl1)")
+    p.add_argument("--method", default=METHODS.default, metavar="NAME",
+                   help=f"the method (default {METHODS.default}; list below)")
+    p.add_argument("--max-pixels", type=int_at_least(0), default=0, metavar="N",
+                   help="estimate on copies of the frames reduced to at most N pixels and "
+                   "scale the flow back up: faster on large frames (default 0: full size)")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="flow magnitude of full colour saturation (default: the maximum)")
     p.add_argument("-q", "--quiet", action="store_true",
@@ -68,7 +83,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 
     p = sub.add_parser("show", parents=[common], help="colour-code a flow file",
                        description="Write the Middlebury colour coding of a .flo/.png flow.")
-    p.add_argument("flow", metavar="FLOW", help=".flo or KITTI .png flow file")
+    p.add_argument("flow", metavar="FLOW", help="flow file: .flo, KITTI .png or .npy")
     p.add_argument("-o", "--output", required=True, metavar="OUT.png")
     p.add_argument("--max-radius", type=float, metavar="R",
                    help="flow magnitude of full colour saturation (default: the maximum)")
@@ -77,8 +92,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 
     p = sub.add_parser("eval", parents=[common], help="score a flow against ground truth",
                        description="Print AEE, AAE (degrees), RMS and R1/R3/R5 of EST vs GT.")
-    p.add_argument("est", metavar="EST", help="estimated flow (.flo or .png)")
-    p.add_argument("gt", metavar="GT", help="ground-truth flow (.flo or .png)")
+    p.add_argument("est", metavar="EST", help="estimated flow (.flo, KITTI .png or .npy)")
+    p.add_argument("gt", metavar="GT", help="ground-truth flow (.flo, KITTI .png or .npy)")
     p.add_argument("--occlusions", metavar="MASK.png",
                    help="occlusion mask (white = occluded) for noc/occ scores")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -94,9 +109,12 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.set_defaults(func=_cmd_demo)
 
 
-    p = sub.add_parser("methods", parents=[common], help="list the methods",
-                       description="List the registered methods.")
-    p.add_argument("-p", "--params", action="store_true", help="with their parameters")
+    p = sub.add_parser("methods", parents=[common], help="list the methods, or one in full",
+                       description="List the methods with when to use each; with NAME, "
+                       "that method's parameters (flag, symbol, default, range, unit).")
+    p.add_argument("name", nargs="?", metavar="NAME", help="one method, e.g. tvl1")
+    p.add_argument("-p", "--params", action="store_true",
+                   help="every method with its full parameter descriptions")
     p.add_argument("--markdown", action="store_true", help="parameter tables in Markdown")
     p.set_defaults(func=_cmd_methods)
 
@@ -105,12 +123,14 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 def _cmd_flow(args: argparse.Namespace) -> int:
     import varflow
     from varflow.io import read_image, write_flow, write_image
+    from varflow.io.images import FLOW_EXTENSIONS
     from varflow.viz import flow_to_color
 
     method = get_method(args.method)
     params = make_params(method, **_own_params(args, method, "method"))
     max_radius = _max_radius(args.max_radius)
-    out = _check_output(args.output, (".flo", ".png"), "-o/--output")
+    _claim_inputs((args.frame0, "FRAME0"), (args.frame1, "FRAME1"))
+    out = _check_output(args.output, FLOW_EXTENSIONS, "-o/--output")
     png = _check_output(args.png, None, "--png") if args.png else None
 
     f0 = read_image(args.frame0)
@@ -120,7 +140,8 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     _compile_notice(method.name, args.quiet)
     t0 = time.perf_counter()
     with _Progress(f"{method.name}", args.quiet) as progress:
-        flow = varflow.flow(f0, f1, method.name, params=params, callback=progress)
+        flow = varflow.flow(f0, f1, method.name, params=params, callback=progress,
+                            max_pixels=args.max_pixels)
     seconds = time.perf_counter() - t0
     write_flow(out, flow)
     if png is not None:
@@ -132,6 +153,10 @@ def _cmd_flow(args: argparse.Namespace) -> int:
         f"{method.name}: {w}x{h} in {seconds:.2f} s, mean |w| {mag.mean():.3f} px, "
         f"max |w| {mag.max():.3f} px -> {out}{extra}"
     )
+    if out.suffix.lower() == ".png" and png is None:
+        print(f"{PROG}: note: {out} is a 16-bit KITTI flow PNG (u, v, valid), not a picture: "
+              "image viewers show it as flat; use --png COLOUR.png or 'varflow show' for one",
+              file=sys.stderr)
     return 0
 
 
@@ -140,6 +165,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from varflow.viz import flow_to_color, flow_to_color_with_legend
 
     max_radius = _max_radius(args.max_radius)
+    _claim_inputs((args.flow, "FLOW"))
     out = _check_output(args.output, None, "-o/--output")
     flow = read_flow(args.flow)
     if args.legend:
@@ -247,14 +273,23 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_methods(args: argparse.Namespace) -> int:
     from ..retime.methods import INTERPOLATORS
 
-    width = max(len(n) for n in (*METHODS, *TRACKERS, *INTERPOLATORS))
-    for title, registry in (("two-frame flow (varflow flow --method)", METHODS),
-                            ("trajectories (varflow track --method)", TRACKERS),
-                            ("frame interpolation (varflow interpolate / retime --method)",
-                             INTERPOLATORS)):
+    kinds = (("two-frame flow (varflow flow --method)", METHODS),
+             ("trajectories (varflow track --method)", TRACKERS),
+             ("frame interpolation (varflow interpolate / retime --method)", INTERPOLATORS))
+    if args.name is not None:
+        if not any(args.name in registry for _, registry in kinds):
+            names = ", ".join(n for _, registry in kinds for n in registry)
+            raise ValueError(f"unknown method {args.name!r}; available: {names}")
+        if args.markdown:
+            print(parameter_table(args.name, markdown=True))
+        else:
+            print(method_card(args.name))
+        return 0
+    width = max(len(n) for _, registry in kinds for n in registry)
+    for title, registry in kinds:
         print(f"# {title}")
         for name, m in registry.items():
-            print(f"{name:<{width}}  {m.description}")
+            print(f"{name:<{width}}  {m.use if not args.params else m.description}")
             if args.params:
                 if args.markdown:
                     print()

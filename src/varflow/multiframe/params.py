@@ -150,10 +150,10 @@ class MultiFrameParams(FlowComposed):
         Also repair the two frames next to the reference, ``ref ± 1``, in the
         propagation and in the final repair.  Their flows come from the whole
         pyramid (no propagated band along object edges to undo), and on real
-        footage the repair's photometric cost is less reliable than those flows:
-        on MPI-Sintel final/alley_1 (frame r + 1 of 9-frame windows) this repair
-        brings the error up to that of the two-frame flow.  Default False; see
-        benchmarks/HISTORY.md.
+        footage the repair's photometric cost is less reliable than those flows.
+        Default False: on MPI-Sintel final/alley_1 (frame r + 1 of 9-frame
+        windows) this repair brings the error up to that of the two-frame flow;
+        see benchmarks/HISTORY.md.
     repair_cost : {"colour", "relit", "census"}
         The residual that the propagation's repair and the final repair compare
         (:func:`varflow.ops.fusion.repair_with`): the frames' colours; the colours

@@ -98,6 +98,13 @@ def _prepare_naive(frame0: np.ndarray, frame1: np.ndarray, params: NaiveParams,
 
 INTERPOLATORS = INTERPOLATE
 
+_FLOW_KNOB = ("flow_method",
+              "the two-frame method of the flows: tvl1-ld for fast motion, tvl1-fast for "
+              "speed")
+_PIXELS_KNOB = ("flow_max_pixels",
+                "frames larger than this many pixels get their flows on a reduced copy: "
+                "lower is faster; 0 never")
+
 # Memory: estimated as the flows' method on the pair (varflow._memory); kernels: the
 # flows' and the splatting's.
 INTERPOLATE.register(Interpolator(
@@ -106,6 +113,8 @@ INTERPOLATE.register(Interpolator(
     "time (the simple baseline)",
     defaults=NaiveParams,
     kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    use="the simple baseline, for comparisons: ghosts where things appear or disappear",
+    knobs=(_FLOW_KNOB,),
     prepare=_prepare_naive,
 ))
 INTERPOLATE.register(Interpolator(
@@ -115,6 +124,8 @@ INTERPOLATE.register(Interpolator(
     "trajectories from the neighbouring frames when given (Xu et al. 2019)",
     defaults=SplatParams,
     kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    use="the best quality: slow motion and frame-rate conversion",
+    knobs=(_FLOW_KNOB, _PIXELS_KNOB),
     prepare=prepare_splat,
     context=1,
 ))
@@ -124,12 +135,15 @@ INTERPOLATE.register(Interpolator(
     "(within 3x of minterpolate's time)",
     defaults=splat_fast_defaults,
     kernels=("varflow.twoframe.tvl1:tvl1_iterations",),
+    use="previews and long videos: several times faster than splat, within 3x of "
+    "minterpolate's time",
+    knobs=(_PIXELS_KNOB,),
     prepare=prepare_splat,
     context=1,
 ))
 
 #: The method of :func:`interpolate` when none is named.
-DEFAULT_INTERPOLATOR = "splat"
+DEFAULT_INTERPOLATOR = INTERPOLATE.default
 
 
 def get_interpolator(name: str) -> Interpolator:

@@ -43,9 +43,52 @@ def _preset(name: str):
 
 def _register(name: str, solve_warp: Any, description: str, memory: MemoryFactors,
               kernels: tuple[str, ...], compile_seconds: int, run: Any = None) -> None:
+    use, knobs = _USE[name]
     FLOW.register(Method(name=name, description=description, defaults=_preset(name),
                          memory=memory, kernels=kernels, compile_seconds=compile_seconds,
-                         solve_warp=solve_warp, run=run))
+                         solve_warp=solve_warp, run=run, use=use, knobs=knobs))
+
+
+_DATA = ("data_weight", "λ: higher follows the images more closely (sharper edges, more "
+         "noise), lower gives smoother flow")
+_WARPS = ("n_warps", "re-linearisations per pyramid level: more for large or non-linear "
+          "motion, fewer for speed")
+_GREY = ("grey", "--no-grey uses every colour channel: for scenes whose parts differ in "
+         "colour but not in brightness")
+_SPARSE_KNOBS = (_DATA, ("sparse_weight", "λ_SP: how strongly the flow must be a few "
+                         "dictionary patches; higher gives simpler motion"),
+                 ("patch_size", "side of the flow patches, pixels: larger for smoother motion"))
+_TENSOR_KNOBS = (_DATA, ("tensor_a", "smoothing across image edges: higher keeps motion "
+                         "boundaries on edges sharper; 0 is isotropic TV"))
+_USE: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
+    "tvl1": ("the default: accurate flow for small and medium motion", (_DATA, _WARPS, _GREY)),
+    "tvl1-fast": ("previews and long clips: about twice as fast as tvl1, a little less "
+                  "accurate", (_DATA, _WARPS)),
+    "tvl1-ld": ("large or fast motion (things moving farther than their own size, low frame "
+                "rates): adds patch matching",
+                (_DATA, ("match_max_displacement", "largest motion searched, pixels: raise it "
+                         "for motion beyond it"), _WARPS)),
+    "tensor": ("thin or oriented structure (fibres, vessels, text) on the book's energy; "
+               "tvl1-tensor is usually better", _TENSOR_KNOBS),
+    "sparse-dct": ("research: the book's sparse regulariser with a fixed dictionary; slow",
+                   _SPARSE_KNOBS),
+    "sparse-1d": ("research: the book's sparse regulariser, one learned dictionary; slow",
+                  _SPARSE_KNOBS),
+    "sparse-2x1d": ("research: the book's sparse regulariser, a dictionary per component; "
+                    "slow", _SPARSE_KNOBS),
+    "sparse-2d": ("research: the book's sparse regulariser, joint (u, v) patches; slow",
+                  _SPARSE_KNOBS),
+    "tvl1-tensor": ("thin or oriented structure (fibres, vessels, text), with tvl1's "
+                    "robustness", _TENSOR_KNOBS),
+    "tvl1-sparse-dct": ("sparse regularisation with a fixed dictionary, with tvl1's "
+                        "robustness; slow", _SPARSE_KNOBS),
+    "tvl1-sparse-1d": ("sparse regularisation with one learned dictionary, with tvl1's "
+                       "robustness; slow", _SPARSE_KNOBS),
+    "tvl1-sparse-2x1d": ("sparse regularisation with a dictionary per component, with "
+                         "tvl1's robustness; slow", _SPARSE_KNOBS),
+    "tvl1-sparse-2d": ("sparse regularisation of joint (u, v) patches, with tvl1's "
+                       "robustness; slow", _SPARSE_KNOBS),
+}
 
 
 # Memory factors: bytes per pixel measured by benchmarks/bench_memory.py (varflow._memory).
