@@ -3,7 +3,8 @@
 A flow video shows the flow between consecutive frame pairs.  Colours are only
 comparable across the video if every frame uses the same saturation radius, so the
 helpers here take ``max_radius`` explicitly; :func:`flow_max_radius` computes it
-over all flows (streaming: it accepts any iterable).
+over all flows, :func:`flow_percentile_radius` robustly as a percentile of their
+magnitudes (both streaming: they accept any iterable).
 
 * :func:`flow_frame` — Middlebury colour coding (:func:`varflow.viz.flow_to_color`)
   on a given scale, unknown flow in grey, optional colour-wheel legend.
@@ -34,7 +35,9 @@ from .colorwheel import color_wheel_legend, flow_to_color
 
 __all__ = [
     "INVALID_GREY",
+    "SCALE_PERCENTILE",
     "flow_max_radius",
+    "flow_percentile_radius",
     "flow_frame",
     "to_display_rgb",
     "warp_next_frame",
@@ -49,6 +52,13 @@ logger = logging.getLogger(__name__)
 INVALID_GREY: tuple[int, int, int] = (128, 128, 128)
 #: Flow components beyond this magnitude count as unknown (the ``.flo`` convention).
 _UNKNOWN = 1e9
+#: Default percentile of :func:`flow_percentile_radius`: the scale of ``varflow video``.
+SCALE_PERCENTILE = 99.0
+#: Magnitude histogram of :func:`flow_percentile_radius`: geometric bins of
+#: ``10 ** (1 / _BINS_PER_DECADE)`` (0.23 %) from ``_LOWEST`` up; below it is "no motion".
+_LOWEST = 1e-4
+_BINS_PER_DECADE = 1000
+_DECADES = 14  # up to 1e10, past the unknown threshold
 
 
 def _known(flow: np.ndarray) -> np.ndarray:
@@ -88,6 +98,67 @@ def flow_max_radius(flows: Iterable[np.ndarray] | np.ndarray) -> float:
             mag = np.hypot(f[..., 0][known].astype(np.float64), f[..., 1][known])
             peak = max(peak, float(mag.max()))
     return peak * (1.0 + 1e-5) if peak > 0 else 1.0
+
+
+def flow_percentile_radius(
+    flows: Iterable[np.ndarray] | np.ndarray, percentile: float = SCALE_PERCENTILE
+) -> float:
+    """A percentile of the known flow magnitudes of many flows: a robust colour scale.
+
+    A few wrong vectors (occlusions, borders, a pair across a scene cut) set the
+    maximum of :func:`flow_max_radius` and leave every other frame almost white; a
+    high percentile ignores them, and the longer vectors are shown darkened
+    (:func:`flow_frame`).
+
+    Parameters
+    ----------
+    flows : ndarray, shape (F, H, W, 2) or (H, W, 2), or iterable of (H, W, 2)
+        Unknown components (NaN, inf, ``|x| > 1e9``) are ignored, so a flow of NaN
+        (a pair without a flow) does not count.
+    percentile : float, default :data:`SCALE_PERCENTILE`
+        In ``(0, 100]``, over all known pixels of all flows together.
+
+    Returns
+    -------
+    float
+        The percentile, from a histogram of the magnitudes: at most 0.25 % above
+        the exact value (the upper edge of its bin), never above the maximum.  When
+        it is 0 (magnitudes below 1e-4 px count as no motion), the maximum; 1.0 if
+        every flow is zero or unknown.  Always positive.
+
+    Raises
+    ------
+    ValueError
+        If ``percentile`` is outside ``(0, 100]`` or a flow is not ``(H, W, 2)``.
+    """
+    q = float(percentile)
+    if not (0.0 < q <= 100.0):
+        raise ValueError(f"flow_percentile_radius: percentile must be in (0, 100], got {q!r}")
+    if isinstance(flows, np.ndarray) and flows.ndim == 3:
+        flows = [flows]
+    n_bins = _DECADES * _BINS_PER_DECADE
+    counts = np.zeros(n_bins + 1, np.int64)  # counts[0]: below _LOWEST
+    peak = 0.0
+    for k, flow in enumerate(flows):
+        f = _check_flow(flow, f"flow_percentile_radius (flow {k})")
+        known = _known(f)
+        if not known.any():
+            continue
+        mag = np.hypot(f[..., 0][known].astype(np.float64), f[..., 1][known])
+        peak = max(peak, float(mag.max()))
+        moving = mag >= _LOWEST
+        idx = np.floor(np.log10(mag[moving] / _LOWEST) * _BINS_PER_DECADE).astype(np.int64)
+        counts += np.bincount(np.minimum(idx, n_bins - 1) + 1, minlength=n_bins + 1)
+        counts[0] += int(mag.size - moving.sum())
+    total = int(counts.sum())
+    if total == 0 or peak == 0.0:
+        return 1.0
+    rank = math.ceil(q / 100.0 * total)  # the rank-th smallest magnitude (1-based)
+    b = int(np.searchsorted(np.cumsum(counts), rank))
+    if b == 0:
+        return peak * (1.0 + 1e-5)
+    upper = _LOWEST * 10.0 ** (b / _BINS_PER_DECADE)
+    return min(upper, peak * (1.0 + 1e-5))
 
 
 def flow_frame(
