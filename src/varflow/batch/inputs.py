@@ -37,7 +37,16 @@ from pathlib import Path
 
 from ..io.codecs import VIDEO_EXTENSIONS
 from ..io.probe import video_info
-from ..io.sequences import IMAGE_EXTENSIONS, list_frame_files, natural_key
+from ..io.sequences import (
+    IMAGE_EXTENSIONS,
+    list_frame_files,
+    missing_input_error,
+    natural_key,
+    no_frames_message,
+    not_a_sequence_message,
+    single_image_message,
+    too_few_frames_message,
+)
 
 __all__ = ["BatchInput", "InputProbe", "LIST_EXTENSIONS", "expand_inputs", "probe_input"]
 
@@ -139,11 +148,16 @@ def _classify(path: Path, origin: str, name: str | None, strict: bool) -> list[B
         log.info("%s: skipping %s (neither a video nor a folder)", origin, path)
         return []
     if suffix in IMAGE_EXTENSIONS:
-        raise ValueError(f"{origin}: {path} is a single image; give the folder of the frames")
-    raise ValueError(
-        f"{origin}: {path} is neither a video ({', '.join(sorted(VIDEO_EXTENSIONS))}), "
-        f"a frame folder nor an input list ({', '.join(sorted(LIST_EXTENSIONS))})"
-    )
+        raise ValueError(_at(origin, path, single_image_message(path)))
+    lists = sorted(LIST_EXTENSIONS)
+    raise ValueError(_at(origin, path, f"{not_a_sequence_message(path)}; input lists end in "
+                         f"{', '.join(lists[:-1])} or {lists[-1]}"))
+
+
+def _at(origin: str, path: Path, message: str) -> str:
+    """``message`` (which names ``path``), after ``origin`` when that is not the path
+    itself (an entry of an input list: ``list.txt:3``)."""
+    return message if Path(os.path.expanduser(origin)) == path else f"{origin}: {message}"
 
 
 def _natural(paths: list[str]) -> list[str]:
@@ -166,7 +180,7 @@ def _expand_one(
             found = [BatchInput(found[0].path, _check_name(name, origin), found[0].kind)]
         return found
     if not path.exists():
-        raise FileNotFoundError(2, f"{origin}: input not found", str(path))
+        raise missing_input_error(path, None if base is None else origin)
     if allow_list and path.is_file() and path.suffix.lower() in LIST_EXTENSIONS:
         if name is not None:
             raise ValueError(f"{origin}: an input list cannot be given a name")
@@ -268,15 +282,19 @@ def probe_input(inp: BatchInput) -> InputProbe:
     Raises
     ------
     ValueError, OSError
-        When the video cannot be opened or the folder has no frames.
+        When the video cannot be opened, or the input has fewer than 2 frames (the
+        messages of :func:`varflow.io.sequences.no_frames_message` and
+        :func:`varflow.io.sequences.too_few_frames_message`).
     """
     if inp.kind == "folder":
         files = list_frame_files(inp.path)
         if not files:
-            raise ValueError(f"{inp.path}: no image files in the folder")
+            raise ValueError(no_frames_message(inp.path))
+        if len(files) < 2:
+            raise ValueError(too_few_frames_message(inp.path, len(files)))
         digest = hashlib.sha256("\n".join(_stat_key(f) for f in files).encode()).hexdigest()
         return InputProbe(len(files), tuple(str(f) for f in files), digest)
     n_frames = int(video_info(inp.path).n_frames)
-    if n_frames < 1:
-        raise ValueError(f"{inp.path}: the video has no frames")
+    if n_frames < 2:
+        raise ValueError(too_few_frames_message(inp.path, n_frames))
     return InputProbe(n_frames, None, hashlib.sha256(_stat_key(inp.path).encode()).hexdigest())

@@ -8,6 +8,7 @@ a video into one array.  See :mod:`varflow.io.video` for the conventions.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
@@ -23,7 +24,17 @@ from .codecs import VIDEO_EXTENSIONS
 from .images import read_image
 from .video_reader import VideoReader
 
-__all__ = ["IMAGE_EXTENSIONS", "list_frame_files", "natural_key", "read_frames"]
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "list_frame_files",
+    "missing_input_error",
+    "natural_key",
+    "no_frames_message",
+    "not_a_sequence_message",
+    "read_frames",
+    "single_image_message",
+    "too_few_frames_message",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +56,111 @@ IMAGE_EXTENSIONS: frozenset[str] = frozenset(
 
 
 _DIGITS = re.compile(r"([0-9]+)")
+
+#: The extensions named first in messages (the rest are summed up as "...").
+_USUAL_IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
+_USUAL_VIDEO_EXTENSIONS = (".mp4", ".mkv", ".mov", ".avi", ".webm")
+
+
+def _usual(extensions: frozenset[str], usual: Sequence[str]) -> str:
+    """The usual ones of ``extensions``, then ``...`` when there are more."""
+    named = [e for e in usual if e in extensions] or sorted(extensions)[:5]
+    return ", ".join(named) + (", ..." if len(named) < len(extensions) else "")
+
+
+# Input errors: one wording for every command that reads a frame folder or a video
+# (``varflow track``, ``varflow retime``, the inputs of ``varflow batch``).
+
+
+def missing_input_error(path: PathLike, origin: str | None = None) -> FileNotFoundError:
+    """The error for an input path that does not exist.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The missing path.
+    origin : str, optional
+        Where the path was given (e.g. ``list.txt:3``), named before the message.
+
+    Returns
+    -------
+    FileNotFoundError
+        ``errno`` 2, ``strerror`` ``"input not found"``, ``filename`` the path.
+    """
+    what = "input not found" if origin is None else f"{origin}: input not found"
+    return FileNotFoundError(errno.ENOENT, what, os.fspath(path))
+
+
+def no_frames_message(folder: PathLike) -> str:
+    """The message for a folder that holds no image files.
+
+    Parameters
+    ----------
+    folder : str or path-like
+
+    Returns
+    -------
+    str
+        ``"<folder>: no image files in the folder (looked for .png, .jpg, ...)"``.
+    """
+    return (
+        f"{os.fspath(folder)}: no image files in the folder (looked for "
+        f"{_usual(IMAGE_EXTENSIONS, _USUAL_IMAGE_EXTENSIONS)})"
+    )
+
+
+def too_few_frames_message(source: PathLike, found: int) -> str:
+    """The message for a sequence of fewer than 2 frames.
+
+    Parameters
+    ----------
+    source : str or path-like
+        The folder, video or list the frames come from.
+    found : int
+        The frames it holds.
+
+    Returns
+    -------
+    str
+        ``"<source>: need at least 2 frames, found <found>"``.
+    """
+    return f"{os.fspath(source)}: need at least 2 frames, found {found}"
+
+
+def single_image_message(path: PathLike) -> str:
+    """The message for a single image given where a sequence is needed.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    str
+        ``"<path>: a single image; give the folder of the frames or a video"``.
+    """
+    return f"{os.fspath(path)}: a single image; give the folder of the frames or a video"
+
+
+def not_a_sequence_message(path: PathLike) -> str:
+    """The message for a file that is neither a video nor an image.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    str
+        ``"<path>: neither a video nor a folder of frames (unknown extension '.xyz';
+        videos end in .mp4, .mkv, ...)"``.
+    """
+    p = Path(os.fspath(path))
+    what = f"unknown extension {p.suffix!r}" if p.suffix else "no extension"
+    return (
+        f"{p}: neither a video nor a folder of frames ({what}; videos end in "
+        f"{_usual(VIDEO_EXTENSIONS, _USUAL_VIDEO_EXTENSIONS)})"
+    )
 
 
 def natural_key(name: str) -> tuple[list[Any], str]:
@@ -168,7 +284,12 @@ def read_frames(
         On an empty directory or list, an unknown file extension, an unreadable or
         corrupted image or video (the message names the file), frames that differ
         in shape or dtype (naming the offending file or frame), fewer than 2
-        selected frames, or invalid ``start``/``stop``/``step``/``max_frames``.
+        selected frames (the message names ``start``, ``stop``, ``step`` and
+        ``max_frames`` only when they are not the defaults), or invalid
+        ``start``/``stop``/``step``/``max_frames``.  The messages of a missing path,
+        a folder without images, a single image and an unknown file type are those
+        of :func:`missing_input_error`, :func:`no_frames_message`,
+        :func:`single_image_message` and :func:`not_a_sequence_message`.
     TypeError
         If ``source`` is neither a path nor a list/tuple of paths.
 
@@ -193,27 +314,18 @@ def read_frames(
     elif isinstance(source, str | os.PathLike):
         path = Path(os.fspath(source))
         if not path.exists():
-            raise FileNotFoundError(2, "frame source not found", str(path))
+            raise missing_input_error(path)
         if path.is_dir():
             files = list_frame_files(path)
             if not files:
-                raise ValueError(
-                    f"read_frames: no image files in the directory {path} (looked for "
-                    f"{', '.join(sorted(IMAGE_EXTENSIONS))})"
-                )
-            what = f"directory {path}"
+                raise ValueError(no_frames_message(path))
+            what = str(path)
         elif path.suffix.lower() in VIDEO_EXTENSIONS:
             return _read_video(path, start, stop, step, max_frames)
         elif path.suffix.lower() in IMAGE_EXTENSIONS:
-            raise ValueError(
-                f"read_frames: {path} is a single image; pass a directory, a list of image "
-                "files or a video"
-            )
+            raise ValueError(single_image_message(path))
         else:
-            raise ValueError(
-                f"read_frames: {path}: unknown extension {path.suffix!r}; pass a directory, "
-                f"a list of image files or a video ({', '.join(sorted(VIDEO_EXTENSIONS))})"
-            )
+            raise ValueError(not_a_sequence_message(path))
     else:
         raise TypeError(
             "read_frames: source must be a path or a list/tuple of paths, got "
@@ -222,19 +334,41 @@ def read_frames(
 
     selected = [files[i] for i in select(len(files), start, stop, step, max_frames)]
     if len(selected) < 2:
-        raise ValueError(
-            f"read_frames: {len(selected)} frame(s) selected from the {what} ({len(files)} "
-            f"file(s)) with start={start}, stop={stop}, step={step}, max_frames={max_frames}; "
-            "need at least 2"
-        )
+        raise ValueError(_too_few(what, len(files), len(selected), start, stop, step, max_frames))
     for p in selected:  # fail on a missing file before decoding anything
         if not p.exists():
             raise FileNotFoundError(2, "frame file not found", str(p))
     frames = _read_files(selected)
     logger.debug(
-        "read %d frames of %s %s from the %s", len(frames), frames.shape[1:], frames.dtype, what
+        "read %d frames of %s %s from %s", len(frames), frames.shape[1:], frames.dtype, what
     )
     return frames
+
+
+def _too_few(
+    what: str,
+    n: int,
+    n_selected: int,
+    start: int,
+    stop: int | None,
+    step: int,
+    max_frames: int | None,
+) -> str:
+    """:func:`too_few_frames_message`, naming the selection keywords only when they were
+    changed from their defaults (the whole sequence has fewer than 2 frames otherwise)."""
+    changed = [
+        f"{name}={value}"
+        for name, value, default in (
+            ("start", start, 0),
+            ("stop", stop, None),
+            ("step", step, 1),
+            ("max_frames", max_frames, None),
+        )
+        if value != default
+    ]
+    if not changed:
+        return too_few_frames_message(what, n)
+    return f"{what}: need at least 2 frames, {n_selected} of {n} selected with {', '.join(changed)}"
 
 
 def _read_video(
@@ -245,9 +379,7 @@ def _read_video(
         selected = select(len(reader), start, stop, step, max_frames)
         if len(selected) < 2:
             raise ValueError(
-                f"read_frames: {len(selected)} frame(s) selected from the video {path} "
-                f"({len(reader)} frames) with start={start}, stop={stop}, step={step}, "
-                f"max_frames={max_frames}; need at least 2"
+                _too_few(str(path), len(reader), len(selected), start, stop, step, max_frames)
             )
         frames = reader.read_indices(selected)
     logger.debug("decoded %d frames of %s from %s", len(frames), frames.shape[1:], path)

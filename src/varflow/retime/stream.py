@@ -231,7 +231,9 @@ def retime_frames(
         instead of interpolating.
     stats : dict, optional
         Filled with counters: ``read`` (source frames), ``passthrough``,
-        ``interpolated``, ``cut_frames`` (outputs repeated at a cut), ``cuts``
+        ``held_last`` (the pass-through frames that repeat the frame before them: the
+        last source frame held to the end of the output), ``interpolated``,
+        ``cut_frames`` (outputs repeated at a cut), ``cuts``
         (pairs with output frames found to be cuts), ``pairs`` (pairs
         interpolated), ``flows`` (estimated), ``cached_flows`` (flows of a
         neighbouring pair reused: a four-frame method estimates two flows per pair
@@ -260,8 +262,8 @@ def retime_frames(
     interp = get_interpolator(DEFAULT_INTERPOLATOR if method is None else method)
     p = make_interp_params(interp, params, **overrides)
     counters = stats if stats is not None else {}
-    for key in ("read", "passthrough", "interpolated", "cut_frames", "cuts", "pairs",
-                "max_held"):
+    for key in ("read", "passthrough", "held_last", "interpolated", "cut_frames", "cuts",
+                "pairs", "max_held"):
         counters.setdefault(key, 0)
     return _retime(iter(frames), schedule, interp, p, scene_cuts, counters, callback)
 
@@ -323,6 +325,7 @@ def _retime(it: Iterator[np.ndarray], schedule: Schedule, interp: Any, p: Any,
             read_to(step.source)
             outs: Iterable[np.ndarray] = (held[step.source] for _ in step.frames)
             stats["passthrough"] += len(step.frames)
+            stats["held_last"] += len(step.frames) - 1  # only the last frame repeats
         else:
             i = step.pair
             read_to(i + 2)  # holds i - 1 .. i + 2
@@ -369,6 +372,10 @@ class RetimeSummary:
     passthrough, interpolated, cut_frames : int
         Output frames that are source frames by the schedule, interpolated, and
         repeated source frames at scene cuts (they add up to ``n_output``).
+    held_last : int
+        Of the ``passthrough`` frames, those that repeat the frame before them: the
+        last source frame held for extra frames to reach the output's duration
+        (``passthrough - held_last`` distinct source frames are passed through).
     cuts : int
         The scene cuts (pairs) found.
     flows : int
@@ -389,6 +396,7 @@ class RetimeSummary:
     rate_in: Fraction
     rate_out: Fraction
     passthrough: int = 0
+    held_last: int = 0
     interpolated: int = 0
     cut_frames: int = 0
     cuts: int = 0
@@ -437,7 +445,15 @@ class _Source:
     """A video file or a frame folder read one frame at a time."""
 
     def __init__(self, path: Path, input_fps: Any) -> None:
+        from ..io.sequences import (
+            missing_input_error,
+            no_frames_message,
+            not_a_sequence_message,
+            single_image_message,
+        )
         from ..io.video import (
+            IMAGE_EXTENSIONS,
+            VIDEO_EXTENSIONS,
             VideoReader,
             check_video_complete,
             list_frame_files,
@@ -448,17 +464,27 @@ class _Source:
         self.reader: Any = None
         self.files: list[Path] | None = None
         if not path.exists():
-            raise FileNotFoundError(2, "source not found", str(path))
+            raise missing_input_error(path)
         if path.is_dir():
             self.files = list_frame_files(path)
             if not self.files:
-                raise ValueError(f"{path}: no image files in the folder")
+                raise ValueError(no_frames_message(path))
             self.n = len(self.files)
             self.rate = (DEFAULT_INPUT_FPS if input_fps is None
                          else parse_rate(input_fps, "input fps"))
             self.kind = "folder"
             return
-        self.reader = VideoReader(path)
+        suffix = path.suffix.lower()
+        if suffix in IMAGE_EXTENSIONS:
+            raise ValueError(single_image_message(path))
+        try:
+            self.reader = VideoReader(path)
+        except ValueError as exc:
+            if suffix in VIDEO_EXTENSIONS:
+                raise
+            # Any file FFmpeg reads is a video; one it cannot read, with an unknown
+            # extension, is most likely not meant to be one.
+            raise ValueError(not_a_sequence_message(path)) from exc
         check_video_complete(path)
         self.n = len(self.reader)
         self.kind = "video"
@@ -615,7 +641,9 @@ def retime_video(
     src = _Source(src_path, input_fps)
     try:
         if src.n < 2:
-            raise ValueError(f"{src_path}: {src.n} frame(s); retiming needs at least 2")
+            from ..io.sequences import too_few_frames_message
+
+            raise ValueError(too_few_frames_message(src_path, src.n))
         schedule = (fps_schedule(src.n, src.rate, rate_out) if rate_out is not None
                     else slowmo_schedule(src.n, int(slowmo or 0), src.rate))
         log.info("%s: %d frames at %s fps -> %d frames at %s fps (%s)", src_path, src.n,
@@ -654,7 +682,7 @@ def retime_video(
     return RetimeSummary(
         source=src_path, output=out_path, method=interp.name, n_source=src.n,
         n_output=written, rate_in=schedule.rate_in, rate_out=schedule.rate_out,
-        passthrough=stats["passthrough"],
+        passthrough=stats["passthrough"], held_last=stats["held_last"],
         interpolated=stats["interpolated"], cut_frames=stats["cut_frames"],
         cuts=stats["cuts"], flows=int(stats.get("flows", 0)), audio=audio_note,
         seconds=time.perf_counter() - t0, stats=stats,
