@@ -360,3 +360,54 @@ def test_track_animation_one_picture_per_frame() -> None:
         np.testing.assert_array_equal(pictures[n], expect)
     with pytest.raises(ValueError, match="frames"):
         list(track_animation(frames[:2], traj, REF))
+
+
+def test_draw_tracks_legend_and_title() -> None:
+    """The legend is a white band under the picture, which stays as it was: a dot, a
+    tail and, with the visibility, a grey ring and grey dashes, each with its text."""
+    from varflow.viz.plots import _LEGEND_COLOUR, _legend_entries
+
+    traj = translation(3, 1)
+    vis = np.ones((F, H, W), bool)
+    vis[-1, :, : W // 2] = False
+    plain = draw_tracks(BLANK, traj, REF, points=20, visibility=vis)
+    assert plain.shape == (H, W, 3)
+    img = draw_tracks(BLANK, traj, REF, points=20, visibility=vis, legend=True)
+    assert img.shape[0] > H and img.shape[1] >= W
+    np.testing.assert_array_equal(img[:H, :W], plain)
+    band = img[H:]
+    assert (band == 255).all(axis=2).mean() > 0.5  # white
+    assert (band.max(axis=2) < 80).any()  # black text
+    assert (band == _LEGEND_COLOUR).all(axis=2).any()  # the sample dot and tail
+    # the ring and the dashes (the text's anti-aliasing has a few such greys too)
+    greys = int((band == HIDDEN_GREY).all(axis=2).sum())
+    # without the visibility nothing is hidden, and the legend says nothing about it
+    seen = draw_tracks(BLANK, traj, REF, points=20, legend=True)
+    assert int((seen[H:] == HIDDEN_GREY).all(axis=2).sum()) + 20 < greys
+    assert seen.shape[0] < img.shape[0]
+    texts = [t for _, t in _legend_entries(F - 1, 0, hidden=True)]
+    assert texts == [f"point in frame {F - 1}", f"its path, frames 0-{F - 1}",
+                     f"point hidden in frame {F - 1}", "path while hidden"]
+    assert [s for s, _ in _legend_entries(F - 1, 0, hidden=False)] == ["dot", "tail"]
+    # the title (the reference frame, by default) is drawn at the top of the band
+    named = draw_tracks(BLANK, traj, REF, points=20, visibility=vis, legend=True,
+                        title="the reference: f2.png\non f4.png")
+    np.testing.assert_array_equal(named[:H, :W], plain)
+    assert named.shape == img.shape
+    rows = slice(H, H + 20)  # the first line of the title
+    assert not np.array_equal(named[rows], img[rows])
+    np.testing.assert_array_equal(named[-40:], img[-40:])  # the same legend under it
+    only_title = draw_tracks(BLANK, traj, REF, points=20, title="reference frame 2")
+    assert H < only_title.shape[0] < img.shape[0]
+    with pytest.raises(ValueError, match="title"):
+        draw_tracks(BLANK, traj, REF, title=3)  # type: ignore[arg-type]
+
+
+def test_draw_tracks_legend_wraps_to_the_picture() -> None:
+    """A wide picture keeps its width (the entries in columns); a long title is wrapped."""
+    wide = np.zeros((H, 12 * W), np.uint8)
+    traj = np.zeros((F, H, 12 * W, 2), np.float32)
+    img = draw_tracks(wide, traj, REF, points=20, legend=True, title="reference " * 60)
+    assert img.shape[1] == 12 * W
+    one_line = draw_tracks(wide, traj, REF, points=20, legend=True, title="reference")
+    assert img.shape[0] > one_line.shape[0]

@@ -2,7 +2,8 @@
 
 * :func:`draw_tracks` draws what trajectory papers and TAP-Vid draw: a few hundred
   points, each with a coloured tail of its past positions, over one frame of the clip
-  in colour; hidden parts dashed in grey, hidden points as rings.
+  in colour; hidden parts dashed in grey, hidden points as rings; optionally with a
+  legend and a title under the picture.
   :func:`track_animation` draws it for every frame (a video of the tracks).
 * :func:`draw_trajectories` draws a grid of sampled trajectories as polylines over
   a dimmed grey copy of the reference frame.
@@ -577,6 +578,8 @@ def draw_tracks(
     line_width: int = 2,
     seed: int = 0,
     mask: np.ndarray | None = None,
+    legend: bool = False,
+    title: str | None = None,
 ) -> np.ndarray:
     """Tracks as TAP-Vid draws them: sampled points with coloured tails over a frame.
 
@@ -609,10 +612,20 @@ def draw_tracks(
         Seeds the choice of the points.
     mask : ndarray, shape (H, W), bool, optional
         Only points whose reference pixel is in the mask.
+    legend : bool
+        Add a white band under the picture saying what a dot, a tail (and, with
+        ``visibility``, a grey ring and a grey dashed tail) mean.
+    title : str, optional
+        Text at the top of that band (e.g. which frame is the reference), wrapped to
+        the picture's width; a newline starts a new line.  With ``legend`` and no
+        ``title``, the reference frame and ``frame_index`` are named.
 
     Returns
     -------
     ndarray, shape (H, W, 3), uint8
+        With ``legend`` or ``title``: shape ``(H + B, max(W, L), 3)``, the picture in
+        the top-left corner (unchanged) and the band of height ``B`` under it (the
+        picture is widened with white to the band's width ``L`` if narrower).
 
     Raises
     ------
@@ -631,10 +644,101 @@ def draw_tracks(
         raise ValueError(f"{fn}: tail must be an integer >= 0, got {tail!r}")
     if not _is_int(line_width) or line_width < 1:
         raise ValueError(f"{fn}: line_width must be an integer >= 1, got {line_width!r}")
+    if title is not None and not isinstance(title, str):
+        raise ValueError(f"{fn}: title must be a string, got {type(title).__name__}")
     image = Image.fromarray(_colour_frame(frame, uv.shape[1:3], fn))
-    _tracks_on(image, pos, known, seen, colours, int(upto), n_frames if tail is None else tail,
-               line_width)
+    n_tail = n_frames if tail is None else tail
+    _tracks_on(image, pos, known, seen, colours, int(upto), n_tail, line_width)
+    if legend or title is not None:
+        if legend and title is None:
+            title = f"reference frame {ref} of {n_frames}\ndrawn on frame {upto}"
+        entries = _legend_entries(int(upto), max(0, int(upto) - n_tail),
+                                  visibility is not None) if legend else []
+        image = _with_legend(image, title, entries, line_width)
     return np.asarray(image, dtype=np.uint8).copy()
+
+
+#: Colour of the sample dot and tail in a legend (a mid orange of the colour wheel).
+_LEGEND_COLOUR = (230, 120, 20)
+#: The line of the legend on the colours of the points.
+_COLOUR_NOTE = "colour: where the point is in the reference frame"
+
+
+def _legend_entries(upto: int, start: int, hidden: bool) -> list[tuple[str, str]]:
+    """``(symbol, text)`` of the legend of :func:`draw_tracks`: what is drawn."""
+    span = f"frame {upto}" if start == upto else f"frames {start}-{upto}"
+    entries = [("dot", f"point in frame {upto}"), ("tail", f"its path, {span}")]
+    if hidden:
+        entries += [("ring", f"point hidden in frame {upto}"), ("dashes", "path while hidden")]
+    return entries
+
+
+def _legend_font(size: int) -> Any:
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: one bitmap size
+        return ImageFont.load_default()
+
+
+def _wrap(draw: ImageDraw.ImageDraw, text: str, font: Any, width: float) -> list[str]:
+    """``text`` in lines at most ``width`` pixels wide where it has spaces to break at."""
+    lines: list[str] = []
+    for word in text.split():
+        if lines and draw.textlength(f"{lines[-1]} {word}", font=font) <= width:
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    return lines
+
+
+def _with_legend(image: Image.Image, title: str | None, entries: list[tuple[str, str]],
+                 line_width: int) -> Image.Image:
+    """``image`` over a white band: ``title``, the legend entries (in as many columns as
+    fit the picture's width) and the note on the colours, one row each."""
+    w, h = image.size
+    size = min(24, max(12, round(w / 45)))
+    font = _legend_font(size)
+    measure = ImageDraw.Draw(image)
+    pad, row, symbol = size // 2 + 2, round(1.6 * size), 3 * size  # symbol column
+    cell = max((symbol + measure.textlength(t, font=font) for _, t in entries), default=0.0)
+    cell = math.ceil(cell) + 2 * size  # an entry and the space after it
+    columns = max(1, min(len(entries), (w - 2 * pad + 2 * size) // cell)) if entries else 1
+    width = max(w, 2 * pad + (columns * cell - 2 * size if entries else 0))
+    text_rows = [line for part in (title or "").splitlines()
+                 for line in _wrap(measure, part, font, width - 2 * pad)]
+    notes = _wrap(measure, _COLOUR_NOTE, font, width - 2 * pad) if entries else []
+    width = max([width] + [2 * pad + math.ceil(measure.textlength(t, font=font))
+                           for t in text_rows + notes])
+    entry_rows = -(-len(entries) // columns)
+    band = 2 * pad + row * (len(text_rows) + entry_rows + len(notes))
+    canvas = Image.new("RGB", (width, h + band), (255, 255, 255))
+    canvas.paste(image, (0, 0))
+    draw = ImageDraw.Draw(canvas)
+
+    def text_at(x: float, k: int, text: str) -> float:
+        y = h + pad + k * row + row / 2  # middle of row k
+        _, top, _, bottom = draw.textbbox((0, 0), text, font=font)
+        draw.text((x, y - (top + bottom) / 2), text, fill=(0, 0, 0), font=font)
+        return y
+
+    for k, text in enumerate(text_rows):
+        text_at(pad, k, text)
+    r = line_width + 1.5
+    for n, (sym, text) in enumerate(entries):
+        k, x = len(text_rows) + n // columns, pad + (n % columns) * cell
+        y = text_at(x + symbol, k, text)
+        x0, x1 = x + r, x + symbol - size
+        if sym == "dot":
+            draw.ellipse([x1 - r, y - r, x1 + r, y + r], fill=_LEGEND_COLOUR, outline=(0, 0, 0))
+        elif sym == "tail":
+            draw.line([(x0, y), (x1, y)], fill=_LEGEND_COLOUR, width=line_width)
+        elif sym == "ring":
+            draw.ellipse([x1 - r, y - r, x1 + r, y + r], outline=HIDDEN_GREY, width=1)
+        else:
+            _dashed(draw, (x0, y), (x1, y), HIDDEN_GREY, line_width)
+    for k, text in enumerate(notes):
+        text_at(pad, len(text_rows) + entry_rows + k, text)
+    return canvas
 
 
 def track_animation(
