@@ -168,3 +168,22 @@ def test_flow_max_pixels_in_the_api() -> None:
     with pytest.raises(ValueError, match=r"^init_flow: expected shape \(96, 128, 2\)"):
         varflow.flow(f0, f1, "tvl1-fast", max_pixels=3072,
                      init_flow=np.zeros((10, 10, 2), np.float32))
+
+
+def test_track_interpolate_and_retime_keep_their_inputs(tmp_path, capsys) -> None:
+    """No command writes over what it reads, nor two outputs over one another."""
+    a, b, _ = _frames(tmp_path)
+    before = a.read_bytes()
+    rc, _, err = _run(capsys, "interpolate", a, b, "-o", b)
+    assert rc == 2 and f"-o/--output: {b} is also the input B" in err
+    rc, _, err = _run(capsys, "track", a, b, "-o", tmp_path / "t.npz", "--plot", a)
+    assert rc == 2 and f"--plot: {a} is also the input FRAME" in err
+    rc, _, err = _run(capsys, "track", tmp_path, "-o", tmp_path / "t.npz",
+                      "--warped", tmp_path)
+    assert rc == 2 and "--warped" in err and "is also the input FRAME" in err
+    rc, _, err = _run(capsys, "track", a, b, "-o", tmp_path / "t.npz",
+                      "--warped", tmp_path / "w", "--png", tmp_path / "w")
+    assert rc == 2 and "is also the --warped output" in err
+    rc, _, err = _run(capsys, "retime", tmp_path, "-o", tmp_path, "--fps", "50")
+    assert rc == 2 and "is also the input IN" in err
+    assert a.read_bytes() == before and not (tmp_path / "t.npz").exists()

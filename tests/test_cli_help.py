@@ -221,6 +221,7 @@ HISTORY = re.compile(r"benchmarks/|HISTORY|\bmeasured\b|\btuned\b|\bon MPI-Sinte
 
 @pytest.mark.parametrize("argv", [
     ("flow", "--help"), ("track", "--help"), ("retime", "--help"), ("interpolate", "--help"),
+    ("video", "--help"), ("batch", "flow", "--help"), ("eval", "--help"),
     ("methods",), ("methods", "tvl1"), ("methods", "tvl1-ld"), ("methods", "rlr"),
     ("methods", "splat"), ("methods", "--params"),
 ])

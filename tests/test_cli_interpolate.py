@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from fractions import Fraction
 from pathlib import Path
 
@@ -123,7 +124,7 @@ def test_retime_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert rc == 0, err
     # round(5 * 30000 / 24000) = round(6.25) = 6 frames at s = 0, 0.8, 1.6, 2.4, 3.2, 4
     assert "5 frames at 24000/1001 (23.976) fps -> 6 frames at 30000/1001 (29.97) fps" in stdout
-    assert "(4 interpolated, 2 passed through)" in stdout
+    assert "(2 source frames passed through, 4 interpolated)" in stdout
     assert video_info(out).n_frames == 6 and video_rate(out) == Fraction(30000, 1001)
     got = read_frames(out)
     assert np.array_equal(got[0], clip[0]) and np.array_equal(got[5], clip[4])
@@ -131,6 +132,73 @@ def test_retime_video(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
                           "--flow-method", "tvl1-fast", "--n-warps", "2", "-q")
     assert rc == 0, err
     assert len(list((tmp_path / "slow").iterdir())) == 13  # (5 - 1) * 3 + 1
+
+
+_MADE_OF = re.compile(
+    r"^retime (?P<method>\S+): (?P<n_source>\d+) frames at .* fps -> (?P<n_output>\d+) frames "
+    r"at .* fps \((?P<passed>\d+) source frames? passed through, (?P<interpolated>\d+) "
+    r"interpolated(?:, (?P<cut_frames>\d+) repeated at (?P<cuts>\d+) scene cuts?)?"
+    r"(?:, last frame held for (?P<held>\d+) extra frames?)?\) in "
+)
+
+
+def _summary_counts(stdout: str) -> dict[str, int]:
+    match = _MADE_OF.match(stdout)
+    assert match, stdout
+    return {k: int(v or 0) for k, v in match.groupdict().items() if k != "method"}
+
+
+@pytest.mark.parametrize(
+    ("fps", "counts"),
+    [
+        # 5 frames at 24 fps -> 10 at 48: s = 0, 0.5, .., 4, 4.5; s = 4.5 holds frame 4
+        ("48", {"passed": 5, "interpolated": 4, "held": 1}),
+        # -> 6 at 30: s = 0, 0.8, 1.6, 2.4, 3.2, 4
+        ("30", {"passed": 2, "interpolated": 4, "held": 0}),
+        # -> 3 at 12: s = 0, 2, 4
+        ("12", {"passed": 3, "interpolated": 0, "held": 0}),
+        # -> 6 at 27 (round(5.625)): s = 0, 0.89, .., 3.56, 4.44: frame 4 shown once
+        ("27", {"passed": 2, "interpolated": 4, "held": 0}),
+    ],
+)
+def test_retime_summary_adds_up(tmp_path: Path, capsys: pytest.CaptureFixture[str], fps: str,
+                                counts: dict[str, int]) -> None:
+    """The summary counts every output frame once and no source frame twice: a last
+    frame repeated to reach the duration is said to be held, not passed through again."""
+    src = tmp_path / "in"
+    src.mkdir()
+    for k, f in enumerate(frames(5)):
+        write_image(src / f"{k:02d}.png", f)
+    out = tmp_path / "out"
+    rc, stdout, err = run(capsys, "retime", src, "-o", out, "--input-fps", "24", "--fps", fps,
+                          "--method", "naive", "--flow-method", "tvl1-fast", "-q")
+    assert rc == 0, err
+    got = _summary_counts(stdout)
+    assert {k: got[k] for k in counts} == counts
+    assert got["n_source"] == 5 and got["passed"] <= got["n_source"]
+    assert (got["passed"] + got["interpolated"] + got["cut_frames"] + got["held"]
+            == got["n_output"] == len(list(out.iterdir())))
+    assert ("held" in stdout) == (counts["held"] > 0)
+
+
+def test_retime_summary_with_a_scene_cut(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    from varflow.generators.photo import load_photo
+
+    other = load_photo("coffee")
+    src = tmp_path / "in"
+    src.mkdir()
+    shot = frames(2) + [(255 * other[k:k + 2 * H:2, 2 * k:2 * k + 2 * W:2]).round()
+                        .astype(np.uint8) for k in (0, 2)]
+    for k, f in enumerate(shot):
+        write_image(src / f"{k:02d}.png", f)
+    rc, stdout, err = run(capsys, "retime", src, "-o", tmp_path / "out", "--slowmo", "2",
+                          "--method", "naive", "--flow-method", "tvl1-fast", "-q")
+    assert rc == 0, err
+    # 4 frames -> 7: s = 0, 0.5, .., 3; the pair (1, 2) is a cut
+    assert "(4 source frames passed through, 2 interpolated, 1 repeated at 1 scene cut)" in stdout
+    got = _summary_counts(stdout)
+    assert got["passed"] + got["interpolated"] + got["cut_frames"] == got["n_output"] == 7
 
 
 def test_retime_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -164,7 +232,11 @@ def test_help_lists_the_interpolation_parameters(capsys: pytest.CaptureFixture[s
     rc, out, _ = run(capsys, "retime", "--help")
     assert rc == 0
     text = " ".join(out.split())
-    assert "--flow-method STR" in text and "--data-weight FLOAT" in text
-    assert "(default tvl1; splat: tvl1-ld; splat-fast: tvl1-fast)" in text
+    assert "--flow-method STR" in text and "(default tvl1-ld)" in text  # splat's knob
+    assert "--data-weight" not in text  # not a knob: 'varflow methods splat' lists it
+    for name in ("naive", "splat", "splat-fast"):  # every method with when to use it
+        assert f" {name} " in text.split("methods (--method NAME;")[1]
+    rc, out, _ = run(capsys, "retime", "--method", "naive", "--help")
+    assert rc == 0 and "(default tvl1)" in " ".join(out.split())
     rc, out, _ = run(capsys, "--help")
     assert rc == 0 and "interpolate" in out and "retime" in out

@@ -103,7 +103,7 @@ def test_reference_and_frame_validation():
         default_ref(5, 5)
     with pytest.raises(ValueError, match="frames"):
         check_frames(f[:1])
-    with pytest.raises(ValueError, match=r"^frame 1: shape"):
+    with pytest.raises(ValueError, match=r"^frame 0 and frame 1 differ in shape: "):
         check_frames([f[0], np.zeros((10, 13), np.uint8)])
     with pytest.raises(ValueError, match="method"):
         varflow.track(f, method="nope")
@@ -148,8 +148,10 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
     assert params["n_warps"] == 3
     assert len(list((tmp_path / "warped").glob("*.png"))) == 5
     assert len(list((tmp_path / "png").glob("*.png"))) == 5
-    assert (tmp_path / "plot.png").stat().st_size > 0
     from PIL import Image
+
+    with Image.open(tmp_path / "plot.png") as plot:  # the picture, a legend under it
+        assert plot.size[0] >= 96 and plot.size[1] > 72
 
     with Image.open(tmp_path / "t.gif") as gif:
         assert gif.n_frames == 5 and gif.size == (96, 72)
@@ -161,6 +163,33 @@ def test_cli_track_end_to_end(tmp_path, capsys, affine_seq, method):
         m = vis[n] & inside
         m[:4], m[-4:], m[:, :4], m[:, -4:] = False, False, False, False
         assert np.abs(warped - ref_img).mean(-1)[m].mean() < 0.03
+
+
+def test_plot_title_names_the_reference_frame(tmp_path):
+    from varflow.cli.track import _plot_title
+
+    d = tmp_path / "clip"
+    d.mkdir()
+    for n in (10, 2, 1):
+        (d / f"f{n}.png").write_bytes(b"")
+    assert _plot_title([str(d)], 1, 3) == ("reference frame 1 of 3 (f2.png)\n"
+                                           "drawn on frame 2 (f10.png)")
+    assert _plot_title(["a/x.png", "a/y.png"], 0, 2) == ("reference frame 0 of 2 (x.png)\n"
+                                                         "drawn on frame 1 (y.png)")
+    assert _plot_title(["v/clip.mp4"], 4, 9) == ("reference frame 4 of 9 in clip.mp4\n"
+                                                 "drawn on frame 8")
+
+
+def test_cli_track_one_frame_names_no_python_keyword(tmp_path, capsys):
+    from varflow.io import write_image
+
+    d = tmp_path / "one"
+    d.mkdir()
+    write_image(d / "f0.png", np.zeros((48, 64, 3), np.uint8))
+    rc = cli.main(["track", f"{d}/", "-o", str(tmp_path / "t.npz"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err == f"varflow: error: {d}: need at least 2 frames, found 1\n"
+    assert "max_frames" not in err and "stop=" not in err
 
 
 def test_cli_track_errors_are_one_line(tmp_path, capsys):

@@ -54,7 +54,7 @@ class _HelpFormatter(argparse.HelpFormatter):
             body = line.lstrip(" ")
             hang = len(line) - len(body)
             m = re.match(r"(\S+\s{2,})", body) if hang else None
-            sub = " " * (hang + (len(m.group(1)) if m else 2))
+            sub = " " * (hang + (len(m.group(1)) if m else 2)) if hang else ""
             out.append(textwrap.fill(body, width, initial_indent=indent + " " * hang,
                                      subsequent_indent=indent + sub) if body else "")
         return "\n".join(out)
@@ -601,9 +601,9 @@ def _claim(path: Path, what: str) -> None:
 
 
 def _claim_inputs(*items: tuple[str | None, str]) -> None:
-    """Record input files (``(path, label)``) so that no output may replace them."""
+    """Record inputs (``(path, label)``, files or folders) so that no output replaces them."""
     for path, label in items:
-        if path is not None and Path(path).is_file():
+        if path is not None and Path(path).exists():
             _CLAIMED.setdefault(Path(path).resolve(), f"the input {label}")
 
 

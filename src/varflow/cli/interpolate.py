@@ -54,12 +54,15 @@ from ..retime.methods import (
 from ._common import (
     _add_param_flags,
     _check_output,
+    _claim,
+    _claim_inputs,
     _collect_params,
     _compile_notice,
     _own_params,
     _Progress,
     chosen_methods,
     int_at_least,
+    methods_epilog,
     rate_arg,
 )
 
@@ -84,7 +87,6 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
     ``common`` and ``argv`` are).
     """
-    names = ", ".join(INTERPOLATORS)
     params = _collect_params(INTERPOLATORS)
     chosen = chosen_methods(argv, INTERPOLATORS)
 
@@ -92,8 +94,9 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
         "interpolate", parents=[common], help="in-between frames of two images",
         description="Synthesise the frame at time T between image A (t = 0) and image B "
         "(t = 1), or K evenly spaced in-between frames, from the motion between them.",
-        epilog="With -n K the frames are named after OUT: 'mid_%%02d.png' -> mid_01.png...; "
-        "a folder (existing or ending in /) -> DIR/01.png...; 'mid.png' -> mid_01.png...",
+        epilog="With -n K the frames are named after OUT: 'mid_%02d.png' -> mid_01.png...; "
+        "a folder (existing or ending in /) -> DIR/01.png...; 'mid.png' -> mid_01.png...\n\n"
+        + methods_epilog(INTERPOLATORS),
     )
     p.add_argument("frame0", metavar="A", help="first image (t = 0)")
     p.add_argument("frame1", metavar="B", help="second image (t = 1)")
@@ -105,7 +108,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     x.add_argument("-n", type=int_at_least(1), default=None, metavar="K",
                    help="write K frames at t = k / (K + 1), k = 1..K")
     p.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
-                   help=f"one of: {names} (default {DEFAULT_INTERPOLATOR})")
+                   help=f"the method (default {DEFAULT_INTERPOLATOR}; list below)")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar, no compile notice")
     _add_param_flags(p, params, INTERPOLATORS, chosen)
@@ -117,6 +120,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
         "for a new rate with the same duration, --slowmo K for K-1 new frames between every "
         "two at the source rate.  Source frames that fall on output times are passed "
         "through unchanged; scene cuts repeat the nearer frame.",
+        epilog=methods_epilog(INTERPOLATORS),
     )
     r.add_argument("source", metavar="IN", help="video file or folder of frames")
     r.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -127,7 +131,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     x.add_argument("--slowmo", type=int_at_least(2), metavar="K",
                    help="slow motion: K-1 new frames between every two (K >= 2)")
     r.add_argument("--method", default=DEFAULT_INTERPOLATOR, metavar="NAME",
-                   help=f"one of: {names} (default {DEFAULT_INTERPOLATOR})")
+                   help=f"the method (default {DEFAULT_INTERPOLATOR}; list below)")
     r.add_argument("--input-fps", type=rate_arg, metavar="R",
                    help="source frame rate (default: the video's own; 25 for a folder)")
     r.add_argument("--codec", metavar="C",
@@ -179,6 +183,7 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     from ..io.images import read_image, write_image
 
     interp, params = _resolve(args)
+    _claim_inputs((args.frame0, "A"), (args.frame1, "B"))
     folder: Path | None = None  # an output folder -n creates
     if args.n is not None:
         times = [i / (args.n + 1) for i in range(1, args.n + 1)]
@@ -222,6 +227,8 @@ def _cmd_retime(args: argparse.Namespace) -> int:
     from ..retime.stream import retime_video
 
     interp, params = _resolve(args)
+    _claim_inputs((args.source, "IN"))
+    _claim(Path(args.output), "-o/--output")
     if args.quality is not None and args.quality < 0:
         raise ValueError(f"--quality: must be >= 0, got {args.quality}")
     audio = {"auto": None, "copy": True, "none": False}[args.audio]
@@ -233,13 +240,27 @@ def _cmd_retime(args: argparse.Namespace) -> int:
             audio=audio, scene_cuts=args.scene_cuts, callback=progress,
         )
     s = summary
-    cuts = f", {s.cuts} scene cut(s): {s.cut_frames} frame(s) repeated" if s.cuts else ""
     audio_text = f"; audio {s.audio}" if s.audio else ""
     print(f"retime {s.method}: {s.n_source} frames at {_rate_text(s.rate_in)} fps -> "
-          f"{s.n_output} frames at {_rate_text(s.rate_out)} fps ({s.interpolated} "
-          f"interpolated, {s.passthrough} passed through{cuts}) in {s.seconds:.2f} s -> "
-          f"{s.output}{audio_text}")
+          f"{s.n_output} frames at {_rate_text(s.rate_out)} fps ({_made_of(s)}) in "
+          f"{s.seconds:.2f} s -> {s.output}{audio_text}")
     return 0
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def _made_of(s: Any) -> str:
+    """What the output frames of a :class:`RetimeSummary` are; the counts add up to
+    ``n_output``, each source frame passed through counted once."""
+    parts = [f"{_plural(s.passthrough - s.held_last, 'source frame')} passed through",
+             f"{s.interpolated} interpolated"]
+    if s.cuts:
+        parts.append(f"{s.cut_frames} repeated at {_plural(s.cuts, 'scene cut')}")
+    if s.held_last:
+        parts.append(f"last frame held for {_plural(s.held_last, 'extra frame')}")
+    return ", ".join(parts)
 
 
 def _rate_text(rate: Any) -> str:

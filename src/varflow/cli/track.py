@@ -24,6 +24,8 @@ from ..registry import TRACKERS, get_tracker, make_track_params
 from ._common import (
     _add_param_flags,
     _check_output,
+    _claim,
+    _claim_inputs,
     _collect_params,
     _compile_notice,
     _magnitude,
@@ -33,6 +35,7 @@ from ._common import (
     _to_uint8,
     chosen_methods,
     int_at_least,
+    methods_epilog,
 )
 
 __all__ = ["add_parser"]
@@ -48,7 +51,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     """
     p = sub.add_parser("track", parents=[common], help="dense trajectories through a sequence",
                        description="Track every pixel of a reference frame through a sequence "
-                       "(frames as files, a directory or a video).")
+                       "(frames as files, a directory or a video).",
+                       epilog=methods_epilog(TRACKERS))
     p.add_argument("frames", nargs="+", metavar="FRAME",
                    help="image files in order, or one directory of images or video file")
     p.add_argument("-o", "--output", required=True, metavar="OUT.npz",
@@ -56,15 +60,16 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                    "index and metadata")
     p.add_argument("--ref", type=int, default=None, metavar="K",
                    help="reference frame index (default: the centre frame)")
-    p.add_argument("--method", default="rlr", metavar="NAME",
-                   help=f"one of: {', '.join(TRACKERS)} (default rlr)")
+    p.add_argument("--method", default=TRACKERS.default, metavar="NAME",
+                   help=f"the method (default {TRACKERS.default}; list below)")
     p.add_argument("--warped", metavar="DIR", help="write every frame warped back to the "
                    "reference (warped_NNNN.png; points hidden in that frame greyed out)")
     p.add_argument("--png", metavar="DIR", help="write the colour-coded displacement of every "
                    "frame (displacement_NNNN.png, one colour scale)")
     p.add_argument("--plot", metavar="PLOT.png",
                    help="draw the tracks of sampled points over the last frame, as TAP-Vid "
-                   "does: coloured tails through every frame, dashed grey where hidden")
+                   "does: coloured tails through every frame, dashed grey where hidden; a "
+                   "legend under the picture names the reference frame")
     p.add_argument("--animate", metavar="TRACKS.mp4",
                    help="a video (.mp4, .mkv, ...) or animated .gif of the tracks: every "
                    "frame with the points' last 10 positions")
@@ -90,6 +95,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
 
     tracker = get_tracker(args.method)
     params = make_track_params(tracker, **_own_params(args, tracker, "trajectory method"))
+    _claim_inputs(*[(f, "FRAME") for f in args.frames])
     out = _check_output(args.output, (".npz",), "-o/--output")
     plot = _check_output(args.plot, None, "--plot") if args.plot else None
     animate = None
@@ -102,6 +108,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     for flag, value in (("--warped", args.warped), ("--png", args.png)):
         if value:
             d = Path(value)
+            _claim(d, flag)
             d.mkdir(parents=True, exist_ok=True)
             dirs[flag] = d
     max_radius = _max_radius(args.max_radius)
@@ -134,7 +141,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
                         flow_to_color(traj[n], max_radius=radius))
     if plot is not None:
         write_image(plot, draw_tracks(raw[-1], traj, ref, visibility=visible,
-                                      points=args.plot_points))
+                                      points=args.plot_points, legend=True,
+                                      title=_plot_title(args.frames, ref, n_f)))
     if animate is not None:
         pictures = track_animation(raw, traj, ref, visibility=visible, points=args.plot_points)
         _write_animation(animate, pictures)
@@ -149,6 +157,23 @@ def _cmd_track(args: argparse.Namespace) -> int:
     if animate is not None:
         print(f"  animation: {animate}")
     return 0
+
+
+def _plot_title(frames: Sequence[str], ref: int, n_frames: int) -> str:
+    """``reference frame 2 of 5 (f2.png)`` and ``drawn on frame 4 (f4.png)``: the frames
+    of the --plot picture, with their file names (or the video's name)."""
+    from varflow.io.video import list_frame_files
+
+    names: list[str] = []
+    if len(frames) > 1:
+        names = [Path(f).name for f in frames]
+    elif Path(frames[0]).is_dir():
+        names = [f.name for f in list_frame_files(frames[0])]
+    if len(names) != n_frames:  # a video
+        return (f"reference frame {ref} of {n_frames} in {Path(frames[0]).name}\n"
+                f"drawn on frame {n_frames - 1}")
+    return (f"reference frame {ref} of {n_frames} ({names[ref]})\n"
+            f"drawn on frame {n_frames - 1} ({names[-1]})")
 
 
 def _write_animation(path: Path, pictures: Any, fps: int = 10) -> None:
