@@ -200,6 +200,29 @@ def test_scene_cut_detected_on_a_cut_not_on_a_fast_pan() -> None:
     assert not is_scene_cut(fast[1], fast[2], previous=fast[0], following=fast[3])
 
 
+def test_a_cut_from_a_calm_to_a_busy_shot_is_a_spike() -> None:
+    """Issue 47: Sintel alley_1 (calm, 0.07) cut to market_5 (fast, 0.54): the cut
+    scores 1.06, short of twice the busy neighbour; it is still a spike."""
+    from varflow.retime.stream import _decide
+
+    assert _decide(1.061, 0.070, 0.537, CUT_THRESHOLD, 2.0)
+    assert _decide(1.223, 0.629, 0.053, CUT_THRESHOLD, 2.0)  # busy to calm
+    assert not _decide(0.80, 0.10, 0.70, CUT_THRESHOLD, 2.0)  # a burst of motion in a shot
+    assert not _decide(1.10, 1.00, 1.05, CUT_THRESHOLD, 2.0)  # a pan too fast to align
+    assert _decide(0.9, None, None, CUT_THRESHOLD, 2.0)  # no neighbours: the score alone
+
+
+def test_real_cut_between_sintel_shots(data_root) -> None:
+    from varflow.io import read_image
+
+    final = data_root / "sintel" / "training" / "final"
+    a = [read_image(final / "alley_1" / f"frame_{n:04d}.png") for n in (4, 5)]
+    b = [read_image(final / "market_5" / f"frame_{n:04d}.png") for n in (8, 9)]
+    assert is_scene_cut(a[1], b[0], previous=a[0], following=b[1])
+    assert not is_scene_cut(a[0], a[1], previous=None, following=b[0])
+    assert not is_scene_cut(b[0], b[1], previous=a[1], following=None)
+
+
 def test_retime_across_a_cut_repeats_the_nearer_frame() -> None:
     clip = pan(3, 2) + pan(3, 2, seed=1)  # a cut between frames 2 and 3
     stats: dict = {}

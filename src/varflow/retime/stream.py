@@ -23,9 +23,11 @@ about 0 for frames of one shot under a global motion and about 1.4 for two
 unrelated frames of similar statistics (``E|X - Y| / E|X| = sqrt(2)`` for
 independent Gaussian ``X, Y``).
 :func:`is_scene_cut` calls a cut when the score is at least
-:data:`CUT_THRESHOLD` and, when the neighbouring pairs are known, at least
-:data:`CUT_RATIO` times the larger of their scores (a cut is a spike: a shot of
-non-rigid motion, water or crowds, has high scores in every pair).  At a cut the
+:data:`CUT_THRESHOLD` and, when the neighbouring pairs are known, a spike among
+them: at least :data:`CUT_RATIO` times the smaller of their scores and
+:data:`CUT_MARGIN` above the larger (a shot of non-rigid motion, water or crowds,
+has high scores in every pair; a cut from a calm shot to a busy one has one
+neighbour as high as half its own score).  At a cut the
 output frames of the pair repeat the nearer source frame (``t < 1/2``: the
 first, else the second) instead of interpolating, and a four-frame method is not
 given context frames from across a cut.  Gradual transitions (fades, dissolves)
@@ -54,6 +56,7 @@ from .motion import FlowCache
 from .schedule import Schedule, fps_schedule, parse_rate, slowmo_schedule
 
 __all__ = [
+    "CUT_MARGIN",
     "CUT_RATIO",
     "CUT_THRESHOLD",
     "DEFAULT_INPUT_FPS",
@@ -75,8 +78,10 @@ THUMB_SIZE = 48
 MAX_SHIFT = 0.2
 #: :func:`cut_score` at and above which a pair can be a cut.
 CUT_THRESHOLD = 0.6
-#: A cut's score is at least this many times the larger score of its neighbour pairs.
+#: A cut's score is at least this many times the smaller score of its neighbour pairs...
 CUT_RATIO = 2.0
+#: ... and at least this much above the larger one.
+CUT_MARGIN = 0.3
 #: Source rate of a frame folder (and of a video without a usable rate) when no
 #: ``input_fps`` is given; as ``varflow video``.
 DEFAULT_INPUT_FPS = Fraction(25)
@@ -165,6 +170,7 @@ def is_scene_cut(
     following: np.ndarray | None = None,
     threshold: float = CUT_THRESHOLD,
     ratio: float = CUT_RATIO,
+    margin: float = CUT_MARGIN,
 ) -> bool:
     """Is there a scene cut between ``frame0`` and ``frame1``?
 
@@ -177,7 +183,10 @@ def is_scene_cut(
     threshold : float
         Least :func:`cut_score` of a cut.
     ratio : float
-        Least ratio of the pair's score to the larger of its neighbours'.
+        Least ratio of the pair's score to the smaller of its neighbours'.
+    margin : float
+        Least difference between the pair's score and the larger of its
+        neighbours'.
 
     Returns
     -------
@@ -186,15 +195,16 @@ def is_scene_cut(
     t0, t1 = _thumb(frame0), _thumb(frame1)
     prev = None if previous is None else _score(_thumb(previous), t0)
     foll = None if following is None else _score(t1, _thumb(following))
-    return _decide(_score(t0, t1), prev, foll, threshold, ratio)
+    return _decide(_score(t0, t1), prev, foll, threshold, ratio, margin)
 
 
 def _decide(score: float, prev: float | None, foll: float | None, threshold: float,
-            ratio: float) -> bool:
+            ratio: float, margin: float = CUT_MARGIN) -> bool:
     if not score >= threshold:
         return False
     neighbours = [s for s in (prev, foll) if s is not None and np.isfinite(s)]
-    return not neighbours or score >= ratio * max(neighbours)
+    return not neighbours or (score >= ratio * min(neighbours)
+                              and score >= max(neighbours) + margin)
 
 
 # --------------------------------------------------------------------------- streaming
