@@ -187,3 +187,11 @@ def test_track_interpolate_and_retime_keep_their_inputs(tmp_path, capsys) -> Non
     rc, _, err = _run(capsys, "retime", tmp_path, "-o", tmp_path, "--fps", "50")
     assert rc == 2 and "is also the input IN" in err
     assert a.read_bytes() == before and not (tmp_path / "t.npz").exists()
+
+
+def test_parameter_errors_name_the_flag(tmp_path, capsys) -> None:
+    a, b, _ = _frames(tmp_path)
+    rc, _, err = _run(capsys, "flow", a, b, "-o", tmp_path / "f.flo", "--data-weight", "-3")
+    assert rc == 2 and err.strip() == "varflow: error: --data-weight: must be > 0, got -3.0"
+    rc, _, err = _run(capsys, "flow", a, b, "-o", tmp_path / "f.txt")
+    assert rc == 2 and err.strip().endswith("f.txt must end in .flo, .png or .npy")

@@ -40,7 +40,15 @@ import sys
 from collections.abc import Callable, Sequence
 
 from .._version import __version__
-from ._common import PROG, _fail, _one_line, _Parser, _reset_claims, parameter_table
+from ._common import (
+    PROG,
+    _fail,
+    _one_line,
+    _Parser,
+    _reset_claims,
+    flag_names,
+    parameter_table,
+)
 from .flow import DEMO_MAGNITUDE, DEMO_SEED, DEMO_SHAPE
 
 __all__ = ["build_parser", "main", "parameter_table"]
@@ -100,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     pkg_log = logging.getLogger("varflow")
     old_level = pkg_log.level
     _reset_claims()
+    args: argparse.Namespace | None = None
     try:
         try:
             argv = list(sys.argv[1:] if argv is None else argv)
@@ -126,7 +135,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - the CLI turns every error into one line
         if handler is not None:
             log.info("details", exc_info=exc)
-        return _fail(_one_line(exc))
+        return _fail(flag_names(_one_line(exc), args))
     finally:
         if handler is not None:
             pkg_log.removeHandler(handler)

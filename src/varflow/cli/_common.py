@@ -615,7 +615,9 @@ def _check_output(path: str, suffixes: Sequence[str] | None, what: str) -> Path:
     """
     p = Path(path)
     if suffixes is not None and p.suffix.lower() not in suffixes:
-        raise ValueError(f"{what}: {p} must end in {' or '.join(suffixes)}")
+        allowed = " or ".join(suffixes) if len(suffixes) < 3 else \
+            ", ".join(suffixes[:-1]) + f" or {suffixes[-1]}"
+        raise ValueError(f"{what}: {p} must end in {allowed}")
     if suffixes is None:
         from PIL import Image
 
@@ -676,6 +678,17 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 def _split_list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
+
+
+def flag_names(message: str, args: argparse.Namespace | None) -> str:
+    """``message`` with a leading parameter field (``"data_weight: ..."``) written as
+    the flag the user gave (``"--data-weight: ..."``)."""
+    if args is None:
+        return message
+    m = re.match(r"^([a-z][a-z0-9_]*): ", message)
+    if m and m.group(1) in _given_params(args):
+        return "--" + m.group(1).replace("_", "-") + message[len(m.group(1)):]
+    return message
 
 
 def _one_line(exc: BaseException) -> str:
