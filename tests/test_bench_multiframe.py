@@ -454,7 +454,7 @@ def test_cli_parameter_of_no_method_one_line(capsys: pytest.CaptureFixture[str],
         pytest.skip("needs rlr registered")
     rc, _, err = _run(capsys, "bench", "middlebury-multiframe", "--data", str(fake_root),
                       "--methods", "twoframe", "--link-weight", "3", "--quiet")
-    _one_line_error(rc, err, "link_weight")
+    _one_line_error(rc, err, "--link-weight: not a parameter of method(s) twoframe")
 
 
 @pytest.mark.data

@@ -316,7 +316,7 @@ def test_negative_data_weight_names_the_field(
 ) -> None:
     rc, _, err = run(capsys, "flow", pair["f0"], pair["f1"], "-o", tmp_path / "o.flo",
                      "--data-weight", -1)
-    assert_one_line_error(rc, err, "data_weight")
+    assert_one_line_error(rc, err, "--data-weight: must be > 0")
 
 
 @pytest.mark.parametrize(
@@ -324,7 +324,7 @@ def test_negative_data_weight_names_the_field(
     [
         (["flow"], "required"),
         (["flow", "a.png", "b.png", "-o", "x.flo", "--n-warps", "2.5"], "--n-warps"),
-        (["flow", "a.png", "b.png", "-o", "x.txt"], ".flo or .png"),
+        (["flow", "a.png", "b.png", "-o", "x.txt"], ".flo, .png or .npy"),
         (["flow", "a.png", "b.png", "-o", "x.flo", "--method", "nope"], "nope"),
         (["show", "a.flo", "-o", "c.png", "--max-radius", "-2"], "--max-radius"),
         (["bench", "middlebury", "--methods", "tvl1,nope"], "nope"),

@@ -89,8 +89,10 @@ def parameter_rst(kind: str) -> list[str]:
                 owners.append(owner)
         classes = ", ".join(f":class:`{c.__module__}.{c.__qualname__}`" for c in owners)
         title = f"``{name}``"
+        use = entry.use[:1].upper() + entry.use[1:] + "."
         lines += [title, "~" * len(title), "", entry.description[0].upper()
-                  + entry.description[1:] + ".", "",
+                  + entry.description[1:] + ".", "", f"*When to use it:* {use}" if entry.use
+                  else "", "",
                   f"Parameter classes: {classes}.", "",
                   ".. list-table::", "   :header-rows: 1", "   :widths: 28 11 12 49",
                   "   :width: 100%", "   :class: varflow-params", "",
