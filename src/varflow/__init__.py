@@ -20,6 +20,8 @@ endpoint_error / angular_error / rms_endpoint_error / evaluate
 warp(image, flow) / consistency(flow_fw, flow_bw)
     Backward warping (the ``cv2.remap`` of a flow) and the forward-backward
     consistency mask.
+estimate_noise(frames)
+    The noise level of a clip, per channel and over intensity.
 
 Conventions: images are uint8, uint16 or float, ``(H, W)`` or ``(H, W, C)``;
 flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal component u and
@@ -96,11 +98,13 @@ __all__ = [
     "interpolation_methods",
     "warp",
     "consistency",
+    "estimate_noise",
 ]
 
 #: Public names imported on first use (``name: (module, attribute)``), to keep
 #: ``import varflow`` light; :func:`__getattr__` loads them and :func:`__dir__` lists them.
 _LAZY = {
+    "estimate_noise": ("restore.noise", "estimate_noise"),
     "warp": ("compensate", "warp"),
     "consistency": ("compensate", "consistency"),
     "read_flo": ("io.flo", "read_flo"),
