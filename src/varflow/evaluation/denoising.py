@@ -43,8 +43,8 @@ TUNING_CLIPS = ("bikes", "carphone")
 #: Clips on which results are reported (never used to choose a default).
 REPORTING_CLIPS = ("bigbuckbunny", "sintel-demo", "alley_1")
 #: V-BM3D (VapourSynth ``bm3d``, radius 3, basic + final, opponent colour) on the
-#: protocol's noise and frames, from the data's README (measured 2026-12-05 on 2
-#: cores): ``{clip: ({σ: PSNR} for σ 10, 30, 50, temporal error at σ 30, s per frame)}``.
+#: protocol's noise and frames, from the benchmark data's README (2 cores):
+#: ``{clip: ({σ: PSNR} for σ 10, 30, 50, temporal error at σ 30, s per frame)}``.
 VBM3D_REFERENCE: dict[str, tuple[dict[int, float], float, float]] = {
     "bikes": ({10: 44.46, 30: 38.45, 50: 35.43}, 3.63, 0.25),
     "bigbuckbunny": ({10: 39.50, 30: 32.89, 50: 29.52}, 5.82, 0.94),
