@@ -13,7 +13,7 @@ start + 2S, ... < stop`` are read one at a time (a video with
 pair of them, ``(i, i + S)``, becomes one frame of the output, at the input frame
 rate divided by ``S`` (so the output lasts as long as the input section).  The input
 rate is the video's own, or ``--input-fps``; a folder has none and defaults to
-:data:`varflow.retime.stream.DEFAULT_INPUT_FPS` (25), as in ``varflow retime``.
+:data:`varflow.io.sequences.DEFAULT_FOLDER_FPS` (25), as in ``varflow retime``.
 
 Scene cuts: the flow between two shots is meaningless, so a pair across a cut
 (:func:`varflow.retime.stream.is_scene_cut`, the detector of ``varflow retime``,
@@ -42,9 +42,7 @@ import logging
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
-from fractions import Fraction
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -129,114 +127,6 @@ def _check_int(value: int | None, name: str, minimum: int) -> None:
         raise ValueError(f"{name}: must be >= {minimum}, got {value}")
 
 
-class _Clip:
-    """A video file or a folder of frames, read one selected frame at a time.
-
-    Parameters
-    ----------
-    path : str
-        The input; a folder's frames are its image files in natural order.
-    input_fps : Fraction, optional
-        Replaces the video's own rate; the rate of a folder (default 25).
-
-    Attributes
-    ----------
-    n : int
-        Frames of the input.
-    rate : Fraction
-        Its frame rate.
-    kind : str
-        ``"video"`` or ``"folder"``.
-    """
-
-    def __init__(self, path: str, input_fps: Fraction | None) -> None:
-        from ..io.sequences import (
-            missing_input_error,
-            no_frames_message,
-            not_a_sequence_message,
-            single_image_message,
-        )
-        from ..io.video import (
-            IMAGE_EXTENSIONS,
-            VIDEO_EXTENSIONS,
-            VideoReader,
-            check_video_complete,
-            list_frame_files,
-            video_rate,
-        )
-        from ..retime.stream import DEFAULT_INPUT_FPS
-
-        self.path = Path(path)
-        self.reader: Any = None
-        self.files: list[Path] = []
-        if not self.path.exists():
-            raise missing_input_error(self.path)
-        if self.path.is_dir():
-            self.files = list_frame_files(self.path)
-            if not self.files:
-                raise ValueError(no_frames_message(self.path))
-            self.kind = "folder"
-            self.n = len(self.files)
-            self.rate = DEFAULT_INPUT_FPS if input_fps is None else input_fps
-            return
-        suffix = self.path.suffix.lower()
-        if suffix in IMAGE_EXTENSIONS:
-            raise ValueError(single_image_message(self.path))
-        try:
-            self.reader = VideoReader(self.path)
-        except ValueError as exc:
-            if suffix in VIDEO_EXTENSIONS:
-                raise
-            raise ValueError(not_a_sequence_message(self.path)) from exc
-        try:
-            check_video_complete(self.path)
-        except BaseException:
-            self.reader.close()
-            raise
-        self.kind = "video"
-        self.n = len(self.reader)
-        if input_fps is not None:
-            self.rate = input_fps
-        else:
-            rate = video_rate(self.path)
-            if rate is None:
-                log.warning("%s: no frame rate in the file; using %s fps", self.path,
-                            DEFAULT_INPUT_FPS)
-            self.rate = rate or DEFAULT_INPUT_FPS
-
-    def frames(self, start: int, stop: int | None, stride: int) -> Iterator[np.ndarray]:
-        """The frames ``start, start + stride, ... < stop``, of one shape and dtype."""
-        if self.reader is not None:
-            yield from self.reader.iter_frames(start, stop, stride)
-            return
-        from ..io.images import read_image
-
-        first: tuple[tuple[int, ...], np.dtype] | None = None
-        for k in range(self.n)[start:stop:stride]:
-            f = self.files[k]
-            try:
-                frame = read_image(f)
-            except ValueError as exc:
-                raise ValueError(f"{self.path}: cannot read frame {k} ({f.name}): {exc}") from exc
-            if first is None:
-                first = (frame.shape, frame.dtype)
-            elif (frame.shape, frame.dtype) != first:
-                raise ValueError(
-                    f"{self.path}: frame {k} ({f.name}) has shape {frame.shape} and dtype "
-                    f"{frame.dtype}, but the first frame has shape {first[0]} and dtype "
-                    f"{first[1]}"
-                )
-            yield frame
-
-    def __enter__(self) -> _Clip:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if self.reader is not None:
-            self.reader.close()
-
-
 def _render(
     layout: str, flow: np.ndarray, f0: np.ndarray | None, f1: np.ndarray | None,
     radius: float, legend: bool, cut: bool = False,
@@ -307,6 +197,7 @@ def _scale_text(source: str, cuts: int | None) -> str:
 
 def _cmd_video(args: argparse.Namespace) -> int:
     import varflow
+    from varflow.io.sequences import FrameSource
     from varflow.io.video_writer import VideoWriter
     from varflow.viz.video import SCALE_PERCENTILE, flow_percentile_radius
 
@@ -319,7 +210,7 @@ def _cmd_video(args: argparse.Namespace) -> int:
     _check_int(args.stride, "--stride", 1)
     _check_int(args.quality, "--quality", 0)
 
-    with _Clip(args.video, args.input_fps) as clip:
+    with FrameSource(args.video, args.input_fps) as clip:
         selected = range(clip.n)[args.start : args.stop : args.stride]
         n_pairs = len(selected) - 1
         if n_pairs < 1:

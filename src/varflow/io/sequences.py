@@ -12,7 +12,8 @@ import errno
 import logging
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,8 @@ from .images import read_image
 from .video_reader import VideoReader
 
 __all__ = [
+    "DEFAULT_FOLDER_FPS",
+    "FrameSource",
     "IMAGE_EXTENSIONS",
     "list_frame_files",
     "missing_input_error",
@@ -242,6 +245,126 @@ def _read_files(files: Sequence[Path]) -> np.ndarray:
         frames[k] = arr
     assert frames is not None
     return frames
+
+
+#: Frame rate of a folder of frames, and of a video without a usable rate, when none
+#: is given: the PAL rate, a common default of image-sequence tools.
+DEFAULT_FOLDER_FPS = Fraction(25)
+
+
+class FrameSource:
+    """A video file or a folder of frames, read one frame at a time.
+
+    What ``varflow retime`` and ``varflow video`` stream from: the frames are never
+    all in memory.  Opening checks the input (the messages of this module) and, for
+    a video, that it is complete (:func:`varflow.io.probe.check_video_complete`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A folder (its image files in natural order, :func:`list_frame_files`) or a
+        video file.
+    rate : Fraction, optional
+        The input's frame rate, replacing a video's own; a folder's
+        (:data:`DEFAULT_FOLDER_FPS` when not given).
+
+    Attributes
+    ----------
+    path : Path
+    n : int
+        Frames of the input.
+    rate : Fraction
+        Its frame rate.
+    kind : str
+        ``"video"`` or ``"folder"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        A missing path.
+    ValueError
+        An empty folder, a single image, a file that is neither a video nor an
+        image, or an unreadable, corrupt or truncated video.
+    """
+
+    def __init__(self, path: PathLike, rate: Fraction | None = None) -> None:
+        from .probe import check_video_complete, video_rate
+
+        self.path = Path(os.fspath(path))
+        self.reader: VideoReader | None = None
+        self.files: list[Path] = []
+        if not self.path.exists():
+            raise missing_input_error(self.path)
+        if self.path.is_dir():
+            self.files = list_frame_files(self.path)
+            if not self.files:
+                raise ValueError(no_frames_message(self.path))
+            self.kind = "folder"
+            self.n = len(self.files)
+            self.rate = DEFAULT_FOLDER_FPS if rate is None else rate
+            return
+        suffix = self.path.suffix.lower()
+        if suffix in IMAGE_EXTENSIONS:
+            raise ValueError(single_image_message(self.path))
+        try:
+            self.reader = VideoReader(self.path)
+        except ValueError as exc:
+            if suffix in VIDEO_EXTENSIONS:
+                raise
+            # Any file FFmpeg reads is a video; one it cannot read, with an unknown
+            # extension, is most likely not meant to be one.
+            raise ValueError(not_a_sequence_message(self.path)) from exc
+        try:
+            check_video_complete(self.path)
+        except BaseException:
+            self.reader.close()
+            raise
+        self.kind = "video"
+        self.n = len(self.reader)
+        if rate is None:
+            rate = video_rate(self.path)
+            if rate is None:
+                logger.warning("%s: no frame rate in the file; using %s fps", self.path,
+                               DEFAULT_FOLDER_FPS)
+        self.rate = rate or DEFAULT_FOLDER_FPS
+
+    def frames(self, start: int = 0, stop: int | None = None,
+               stride: int = 1) -> Iterator[np.ndarray]:
+        """The frames ``start, start + stride, ... < stop``, decoded one at a time.
+
+        A folder's frames must share the first one's shape and dtype (the message
+        names the file that does not); a video's do by construction.
+        """
+        if self.reader is not None:
+            yield from self.reader.iter_frames(start, stop, stride)
+            return
+        first: tuple[tuple[int, ...], np.dtype] | None = None
+        for k in range(self.n)[start:stop:stride]:
+            f = self.files[k]
+            try:
+                frame = read_image(f)
+            except ValueError as exc:
+                raise ValueError(f"{self.path}: cannot read frame {k} ({f.name}): {exc}") from exc
+            if first is None:
+                first = (frame.shape, frame.dtype)
+            elif (frame.shape, frame.dtype) != first:
+                raise ValueError(
+                    f"{self.path}: frame {k} ({f.name}) has shape {frame.shape} and dtype "
+                    f"{frame.dtype}, but the first frame has shape {first[0]} and dtype "
+                    f"{first[1]}"
+                )
+            yield frame
+
+    def close(self) -> None:
+        """Close the video (nothing to do for a folder)."""
+        if self.reader is not None:
+            self.reader.close()
+
+    def __enter__(self) -> FrameSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def read_frames(

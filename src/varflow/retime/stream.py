@@ -56,10 +56,10 @@ from .motion import FlowCache
 from .schedule import Schedule, fps_schedule, parse_rate, slowmo_schedule
 
 __all__ = [
+    "DEFAULT_INPUT_FPS",  # noqa: F822 - module __getattr__
     "CUT_MARGIN",
     "CUT_RATIO",
     "CUT_THRESHOLD",
-    "DEFAULT_INPUT_FPS",
     "MAX_SHIFT",
     "RetimeSummary",
     "THUMB_SIZE",
@@ -76,15 +76,23 @@ THUMB_SIZE = 48
 #: Largest global shift searched by :func:`cut_score`, as a fraction of the thumbnail's
 #: width and height (the frames of a pan faster than this per frame are not aligned).
 MAX_SHIFT = 0.2
+def __getattr__(name: str) -> Any:
+    # DEFAULT_INPUT_FPS, the source rate of a frame folder (and of a video without a
+    # usable rate) when no input_fps is given, is the readers' own constant
+    # (varflow.io.sequences.DEFAULT_FOLDER_FPS), imported on use: it loads PyAV.
+    if name == "DEFAULT_INPUT_FPS":
+        from ..io.sequences import DEFAULT_FOLDER_FPS
+
+        return DEFAULT_FOLDER_FPS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 #: :func:`cut_score` at and above which a pair can be a cut.
 CUT_THRESHOLD = 0.6
 #: A cut's score is at least this many times the smaller score of its neighbour pairs...
 CUT_RATIO = 2.0
 #: ... and at least this much above the larger one.
 CUT_MARGIN = 0.3
-#: Source rate of a frame folder (and of a video without a usable rate) when no
-#: ``input_fps`` is given; as ``varflow video``.
-DEFAULT_INPUT_FPS = Fraction(25)
 #: File names of the frames of a folder output: ``000000.png``, ``000001.png``, ...
 FRAME_NAME = "{:06d}.png"
 _FRAME_FILE = re.compile(r"^\d{6}\.png$")
@@ -451,80 +459,6 @@ def _output_kind(output: Path) -> str:
     return kind
 
 
-class _Source:
-    """A video file or a frame folder read one frame at a time."""
-
-    def __init__(self, path: Path, input_fps: Any) -> None:
-        from ..io.sequences import (
-            missing_input_error,
-            no_frames_message,
-            not_a_sequence_message,
-            single_image_message,
-        )
-        from ..io.video import (
-            IMAGE_EXTENSIONS,
-            VIDEO_EXTENSIONS,
-            VideoReader,
-            check_video_complete,
-            list_frame_files,
-            video_rate,
-        )
-
-        self.path = path
-        self.reader: Any = None
-        self.files: list[Path] | None = None
-        if not path.exists():
-            raise missing_input_error(path)
-        if path.is_dir():
-            self.files = list_frame_files(path)
-            if not self.files:
-                raise ValueError(no_frames_message(path))
-            self.n = len(self.files)
-            self.rate = (DEFAULT_INPUT_FPS if input_fps is None
-                         else parse_rate(input_fps, "input fps"))
-            self.kind = "folder"
-            return
-        suffix = path.suffix.lower()
-        if suffix in IMAGE_EXTENSIONS:
-            raise ValueError(single_image_message(path))
-        try:
-            self.reader = VideoReader(path)
-        except ValueError as exc:
-            if suffix in VIDEO_EXTENSIONS:
-                raise
-            # Any file FFmpeg reads is a video; one it cannot read, with an unknown
-            # extension, is most likely not meant to be one.
-            raise ValueError(not_a_sequence_message(path)) from exc
-        check_video_complete(path)
-        self.n = len(self.reader)
-        self.kind = "video"
-        if input_fps is not None:
-            self.rate = parse_rate(input_fps, "input fps")
-        else:
-            rate = video_rate(path)
-            if rate is None:
-                log.warning("%s: no frame rate in the file; using %s fps", path,
-                            DEFAULT_INPUT_FPS)
-            self.rate = rate or DEFAULT_INPUT_FPS
-
-    def frames(self) -> Iterator[np.ndarray]:
-        if self.reader is not None:
-            yield from self.reader.iter_frames()
-            return
-        from ..io.images import read_image
-
-        assert self.files is not None
-        for k, f in enumerate(self.files):
-            try:
-                yield read_image(f)
-            except ValueError as exc:
-                raise ValueError(f"{self.path}: cannot read frame {k} ({f.name}): {exc}") from exc
-
-    def close(self) -> None:
-        if self.reader is not None:
-            self.reader.close()
-
-
 def _fsync_dir(directory: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(directory, os.O_RDONLY)
@@ -648,7 +582,10 @@ def retime_video(
     kind = _output_kind(out_path)
     if src_path.exists() and out_path.exists() and src_path.resolve() == out_path.resolve():
         raise ValueError(f"output: {out_path} is the source")
-    src = _Source(src_path, input_fps)
+    from ..io.sequences import FrameSource
+
+    src = FrameSource(src_path, None if input_fps is None
+                      else parse_rate(input_fps, "input fps"))
     try:
         if src.n < 2:
             from ..io.sequences import too_few_frames_message
