@@ -29,7 +29,8 @@ import numpy as np
 
 from ._atomic import atomic_write
 
-__all__ = ["FlowFormatError", "read_flo", "write_flo", "FLO_TAG", "UNKNOWN_FLOW", "MAX_SIDE"]
+__all__ = ["FlowFormatError", "read_flo", "write_flo", "FLO_TAG", "UNKNOWN_FLOW", "MAX_SIDE",
+           "flow_to_write"]
 
 logger = logging.getLogger(__name__)
 
@@ -136,13 +137,32 @@ def read_flo(path: str | os.PathLike[str]) -> np.ndarray:
     return flow
 
 
-def encode_flo(flow: np.ndarray) -> bytes:
-    """Encode a flow field as the bytes of a ``.flo`` file (see :func:`write_flo`)."""
+def flow_to_write(flow: np.ndarray, writer: str) -> np.ndarray:
+    """``flow`` as an array the flow writers take: ``(H, W, 2)`` floating point.
+
+    Parameters
+    ----------
+    flow : array_like
+    writer : str
+        The writer's name, at the start of the message.
+
+    Raises
+    ------
+    ValueError
+        ``"<writer>: expected a flow of shape (H, W, 2), got ..."`` or ``"...:
+        expected a floating-point flow, got dtype ..."``.
+    """
     arr = np.asarray(flow)
     if arr.ndim != 3 or arr.shape[2] != 2:
-        raise ValueError(f"write_flo: expected a flow of shape (H, W, 2), got {arr.shape}")
+        raise ValueError(f"{writer}: expected a flow of shape (H, W, 2), got {arr.shape}")
     if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(f"write_flo: expected a floating-point flow, got dtype {arr.dtype}")
+        raise ValueError(f"{writer}: expected a floating-point flow, got dtype {arr.dtype}")
+    return arr
+
+
+def encode_flo(flow: np.ndarray) -> bytes:
+    """Encode a flow field as the bytes of a ``.flo`` file (see :func:`write_flo`)."""
+    arr = flow_to_write(flow, "write_flo")
     height, width = arr.shape[:2]
     if not (0 < width <= MAX_SIDE and 0 < height <= MAX_SIDE):
         raise ValueError(

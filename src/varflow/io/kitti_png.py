@@ -25,7 +25,7 @@ import numba as nb
 import numpy as np
 
 from ._atomic import atomic_write
-from .flo import MAX_SIDE, FlowFormatError, unknown_pixels
+from .flo import MAX_SIDE, FlowFormatError, flow_to_write, unknown_pixels
 
 __all__ = ["read_kitti_png", "write_kitti_png", "encode_kitti_png"]
 
@@ -314,11 +314,7 @@ def read_kitti_png(path: str | os.PathLike[str]) -> np.ndarray:
 
 def encode_kitti_png(flow: np.ndarray) -> bytes:
     """Encode a flow field as the bytes of a KITTI flow PNG (see :func:`write_kitti_png`)."""
-    arr = np.asarray(flow)
-    if arr.ndim != 3 or arr.shape[2] != 2:
-        raise ValueError(f"write_kitti_png: expected a flow of shape (H, W, 2), got {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(f"write_kitti_png: expected a floating-point flow, got {arr.dtype}")
+    arr = flow_to_write(flow, "write_kitti_png")
     invalid = unknown_pixels(arr)
     scaled = np.where(invalid[..., None], 0.0, arr.astype(np.float64))
     coded = np.clip(np.rint(scaled * _KITTI_SCALE + _KITTI_OFFSET), 0, 65535)

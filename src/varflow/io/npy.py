@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import atomic_write
-from .flo import MAX_SIDE, FlowFormatError
+from .flo import MAX_SIDE, FlowFormatError, flow_to_write
 
 __all__ = ["read_npy_flow", "write_npy_flow"]
 
@@ -82,11 +82,6 @@ def write_npy_flow(path: str | os.PathLike[str], flow: np.ndarray) -> None:
     ValueError
         If ``flow`` is not ``(H, W, 2)`` floating point.
     """
-    arr = np.asarray(flow)
-    if arr.ndim != 3 or arr.shape[2] != 2:
-        raise ValueError(f"write_flow: expected a flow of shape (H, W, 2), got {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(f"write_flow: expected a floating-point flow, got dtype {arr.dtype}")
-    arr = np.ascontiguousarray(arr, dtype=np.float32)
+    arr = np.ascontiguousarray(flow_to_write(flow, "write_npy_flow"), dtype=np.float32)
     with atomic_write(path) as fh:
         np.save(fh, arr, allow_pickle=False)
