@@ -54,6 +54,7 @@ for m in ("tvl1", "tvl1-fast", "tensor"):
 frames = np.stack([f0, f1, f0, f1, f0])
 for t in ("rlr", "chain", "twoframe"):
     varflow.track(frames, 2, t)
+varflow.denoise(np.stack([f0, f1, f0]), 0.05, radius=1)
 """
 
 

@@ -22,6 +22,8 @@ warp(image, flow) / consistency(flow_fw, flow_bw)
     consistency mask.
 estimate_noise(frames)
     The noise level of a clip, per channel and over intensity.
+denoise(frames, sigma=None, method="nlbayes", **params) / restoration_methods()
+    The clip without its noise (motion-compensated NL-Bayes), in the input's dtype.
 
 Conventions: images are uint8, uint16 or float, ``(H, W)`` or ``(H, W, C)``;
 flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal component u and
@@ -36,7 +38,7 @@ the call needs is estimated and compared with the memory available
 (:mod:`varflow._memory`; ``VARFLOW_MEMORY_LIMIT`` overrides the latter).
 
 Layout: every method is an entry of one of the registries of :mod:`varflow.registry`
-(``FLOW``, ``TRACK``, ``INTERPOLATE``), registered by the ``methods`` module of its
+(``FLOW``, ``TRACK``, ``INTERPOLATE``, ``RESTORE``), registered by the ``methods`` module of its
 package (:mod:`varflow.twoframe`, :mod:`varflow.multiframe`, :mod:`varflow.retime`);
 parameters are frozen dataclasses composed of smaller ones (:mod:`varflow.parameters`,
 :mod:`varflow.twoframe.params`); the two-frame solvers plug into the one coarse-to-fine
@@ -55,6 +57,7 @@ from .registry import (
     FLOW,
     INTERPOLATE,
     METHODS,
+    RESTORE,
     TRACK,
     TRACKERS,
     get_method,
@@ -99,12 +102,16 @@ __all__ = [
     "warp",
     "consistency",
     "estimate_noise",
+    "denoise",
+    "restoration_methods",
+    "RESTORE",
 ]
 
 #: Public names imported on first use (``name: (module, attribute)``), to keep
 #: ``import varflow`` light; :func:`__getattr__` loads them and :func:`__dir__` lists them.
 _LAZY = {
     "estimate_noise": ("restore.noise", "estimate_noise"),
+    "denoise": ("restore.denoise", "denoise"),
     "warp": ("compensate", "warp"),
     "consistency": ("compensate", "consistency"),
     "read_flo": ("io.flo", "read_flo"),
@@ -222,6 +229,11 @@ def interpolation_methods() -> list[str]:
     """Names of the registered frame-interpolation methods
     (see :data:`varflow.registry.INTERPOLATE`)."""
     return INTERPOLATE.names()
+
+
+def restoration_methods() -> list[str]:
+    """Names of the registered restoration methods (see :data:`varflow.registry.RESTORE`)."""
+    return RESTORE.names()
 
 
 def interpolate(frame0: np.ndarray, frame1: np.ndarray, t: Any = 0.5, method: str | None = None,

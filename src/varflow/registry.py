@@ -9,6 +9,7 @@ registry                  entries                registered in
 :data:`FLOW`              :class:`Method`        :mod:`varflow.twoframe.methods`
 :data:`TRACK`             :class:`Tracker`       :mod:`varflow.multiframe.methods`
 :data:`INTERPOLATE`       :class:`Interpolator`  :mod:`varflow.retime.methods`
+:data:`RESTORE`           :class:`Restorer`      :mod:`varflow.restore.methods`
 ========================  =====================  =========================================
 
 An entry carries everything known about a method under its name: a one-line
@@ -51,7 +52,9 @@ __all__ = [
     "METHODS",
     "MemoryFactors",
     "Method",
+    "RESTORE",
     "Registry",
+    "Restorer",
     "TRACK",
     "TRACKERS",
     "Tracker",
@@ -211,6 +214,22 @@ class Interpolator(Entry):
     context: int = 0
 
 
+@dataclass(frozen=True)
+class Restorer(Entry):
+    """A restoration method (:data:`RESTORE`): a denoiser of clips.
+
+    Attributes
+    ----------
+    run : callable
+        ``run(clip, sigma, params, callback=None, stats=None) -> clip`` with
+        ``clip`` ``(F, H, W, C)`` float32 in the input's units and ``sigma`` the
+        noise's standard deviation in those units; ``callback(done, total)``
+        reports progress; ``stats`` (a dict) gains timings.
+    """
+
+    run: Callable[..., Any] | None = None
+
+
 class Registry(MutableMapping):
     """The methods of one kind, by name, in registration order.
 
@@ -358,6 +377,9 @@ TRACK = Registry("trajectory method", Tracker, "varflow.multiframe.methods", "rl
 INTERPOLATE = Registry("interpolation method", Interpolator, "varflow.retime.methods",
                        "splat")
 
+#: The restoration methods (:func:`varflow.denoise`).
+RESTORE = Registry("restoration method", Restorer, "varflow.restore.methods", "nlbayes")
+
 METHODS = FLOW
 TRACKERS = TRACK
 
@@ -386,7 +408,7 @@ def make_track_params(method: str | Tracker, params: Any = None, **overrides: An
 def parameter_fields(entry: Entry, flow_method: str | None = None
                      ) -> list[tuple[str, Any, type]]:
     """The flat parameters of any registered entry (:meth:`Registry.fields`)."""
-    for registry in (FLOW, TRACK, INTERPOLATE):
+    for registry in (FLOW, TRACK, INTERPOLATE, RESTORE):
         if isinstance(entry, registry.entry_type):
             return registry.fields(entry, flow_method)
     raise ValueError(f"method: not a registered entry: {entry!r}")

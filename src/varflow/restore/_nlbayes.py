@@ -1,0 +1,546 @@
+"""Kernels of the motion-compensated NL-Bayes denoiser (:mod:`varflow.restore.denoise`).
+
+One pass of NL-Bayes (Lebrun, Buades & Morel 2013) on a clip, with the patch search
+of its video form VNLB (Arias & Morel 2018): for a reference patch of frame ``t``,
+similar patches are searched in a window of frame ``t`` and in small windows of the
+frames ``t ± 1 .. t ± radius`` centred where the reference patch's centre goes along
+the flows between consecutive frames.  The chain stops at the first step whose flow
+the forward-backward check rejects: a neighbour frame where the patch is hidden is
+never searched.  The ``n_similar`` nearest patches (squared distance over the
+patch, on the *guide*: the noisy clip's luminance in the first pass, where the
+colour channels add operations but no accuracy, and all channels of the first
+estimate in the second) form the group, and each channel of the group is
+estimated by an empirical Wiener filter (:func:`estimate_group`):
+
+* first pass: ``P̂ = μ + (C − β σ² I) C⁻¹ (P − μ)`` with ``μ, C`` the mean and
+  covariance of the noisy group;
+* second pass ("oracle"): ``P̂ = μ + C_b (C_b + σ² I)⁻¹ (P − μ)`` with ``C_b`` the
+  covariance of the first estimate's group and ``μ`` the mean of the noisy group;
+
+and a group whose variance is within ``flat · σ²`` of the noise is replaced by its
+mean (NL-Bayes' homogeneous-area rule).  Every estimated patch of the group that
+lies in frame ``t`` is added to frame ``t``'s sums (the "paste trick": a position
+already covered is not a reference again), and the frame is the sum over the count.
+
+Work is split in bands of reference rows; two bands of one phase (even, then odd)
+write disjoint rows, so each phase runs in parallel without races and the result
+does not depend on the number of threads.
+
+:func:`estimate_group` (the Wiener step) has the NumPy reference
+:func:`estimate_group_reference`; the tests compare them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+__all__ = ["band_height", "denoise_pass", "estimate_group", "estimate_group_reference"]
+
+
+def estimate_group_reference(group: np.ndarray, pilot: np.ndarray | None, sigma2: float,
+                             beta: float, flat: float) -> np.ndarray:
+    """NumPy reference of :func:`estimate_group` (same arguments, every patch estimated)."""
+    g = group.astype(np.float64)  # (C, d, m)
+    out = np.empty_like(g)
+    if flat > 0 and np.all(g.reshape(g.shape[0], -1).var(axis=1) < flat * sigma2):
+        out[:] = g.mean(axis=(1, 2), keepdims=True)
+        return out.astype(np.float32)
+    d, m = g.shape[1:]
+    for c in range(g.shape[0]):
+        x = g[c]
+        mu = x.mean(axis=1, keepdims=True)
+        if pilot is None and m - 1 < d:  # the Gram form of a small group
+            xc = x - mu
+            lam, vec = np.linalg.eigh(xc.T @ xc / (m - 1))
+            b = beta * (1.0 + np.sqrt(d / (m - 1))) ** 2
+            w = np.where(lam > 0, np.maximum(lam - b * sigma2, 0) / np.where(lam > 0, lam, 1),
+                         0)
+            out[c] = mu + xc @ (vec * w) @ vec.T
+        elif pilot is None:
+            a = np.cov(x) + _RIDGE * sigma2 * np.eye(d)
+            out[c] = x - beta * sigma2 * np.linalg.solve(a, x - mu)
+        else:
+            a = np.cov(pilot[c].astype(np.float64)) + sigma2 * np.eye(d)
+            out[c] = x - sigma2 * np.linalg.solve(a, x - mu)
+    return out.astype(np.float32)
+
+
+#: Ridge added to the noisy group's covariance in the first pass, in units of σ²: a
+#: group of nearly equal patches (m close to d) keeps a well-conditioned matrix.
+_RIDGE = 1e-3
+
+
+@njit(cache=True)
+def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low,
+                   vec):  # pragma: no cover - numba
+    """Empirical Wiener estimate of a group of patches, channel by channel.
+
+    ``P̂ = P − β σ² C⁻¹ (P − μ)`` in the first pass (C the noisy group's covariance,
+    i.e. ``μ + (C − β σ² I) C⁻¹ (P − μ)``) and ``P̂ = P − σ² (C_b + σ² I)⁻¹ (P − μ)``
+    in the final pass (C_b the first estimate's), both by a Cholesky factorisation;
+    μ is the noisy group's mean.
+
+    Parameters
+    ----------
+    group : ndarray, shape (C, d, m), float32
+        The noisy patches (d values per channel, m patches, m >= 2).
+    pilot : ndarray, shape (C, d, m), float32, or shape (C, d, 0)
+        The first estimate's patches of the same group (final pass), or empty
+        (first pass).
+    sigma2 : float
+        Noise variance σ², in the squared units of the values.
+    beta : float
+        β of the first pass.
+    flat : float
+        γ of the homogeneous-area rule (0: off).
+    keep : ndarray, shape (m,), bool
+        The patches to estimate (the others are left as they are in ``out``).
+    out : ndarray, shape (C, d, m), float32
+        The estimates (written).
+    cov, low : ndarray, shape (d, d), float64
+        Workspace.
+    vec : ndarray, shape (2, d), float64
+        Workspace.
+    """
+    nc, d, m = group.shape
+    if flat > 0:
+        homogeneous = True
+        for c in range(nc):
+            s = 0.0
+            s2 = 0.0
+            for j in range(d):
+                for i in range(m):
+                    v = np.float64(group[c, j, i])
+                    s += v
+                    s2 += v * v
+            n = m * d
+            mean = s / n
+            if s2 / n - mean * mean >= flat * sigma2:
+                homogeneous = False
+                break
+        if homogeneous:
+            for c in range(nc):
+                s = 0.0
+                for j in range(d):
+                    for i in range(m):
+                        s += group[c, j, i]
+                mean = s / (m * d)
+                for j in range(d):
+                    for i in range(m):
+                        if keep[i]:
+                            out[c, j, i] = mean
+            return
+    oracle = pilot.shape[2] == m
+    if not oracle and m - 1 < d:
+        _estimate_small(group, sigma2, beta, keep, out)
+        return
+    mu = vec[0]
+    nk = 0
+    for i in range(m):
+        if keep[i]:
+            nk += 1
+    xs = np.empty((d, m), np.float64)
+    zs = np.empty((d, nk), np.float64)
+    for c in range(nc):
+        for j in range(d):
+            s = 0.0
+            for i in range(m):
+                s += group[c, j, i]
+            mu[j] = s / m
+        if oracle:
+            for j in range(d):
+                s = 0.0
+                for i in range(m):
+                    s += pilot[c, j, i]
+                s /= m
+                for i in range(m):
+                    xs[j, i] = pilot[c, j, i] - s
+        else:
+            for j in range(d):
+                for i in range(m):
+                    xs[j, i] = group[c, j, i] - mu[j]
+        cov[:, :] = np.dot(xs, xs.T)
+        ridge = sigma2 if oracle else _RIDGE * sigma2
+        for j in range(d):
+            cov[j, j] = cov[j, j] / (m - 1) + ridge
+        # Cholesky: cov = L Lᵀ (only the lower triangle of cov is read)
+        for j in range(d):
+            s = cov[j, j]
+            for k in range(j):
+                s -= low[j, k] * low[j, k]
+            ljj = np.sqrt(max(s, 1e-12 * sigma2 + 1e-30))
+            low[j, j] = ljj
+            for i in range(j + 1, d):
+                s = cov[i, j] / (m - 1)
+                for k in range(j):
+                    s -= low[i, k] * low[j, k]
+                low[i, j] = s / ljj
+        # the kept patches, centred, then L Lᵀ z = x - μ for all of them at once
+        for j in range(d):
+            q = 0
+            for i in range(m):
+                if keep[i]:
+                    zs[j, q] = group[c, j, i] - mu[j]
+                    q += 1
+        for j in range(d):
+            for k in range(j):
+                lk = low[j, k]
+                for q in range(nk):
+                    zs[j, q] -= lk * zs[k, q]
+            inv = 1.0 / low[j, j]
+            for q in range(nk):
+                zs[j, q] *= inv
+        for j in range(d - 1, -1, -1):
+            for k in range(j + 1, d):
+                lk = low[k, j]
+                for q in range(nk):
+                    zs[j, q] -= lk * zs[k, q]
+            inv = 1.0 / low[j, j]
+            for q in range(nk):
+                zs[j, q] *= inv
+        factor = sigma2 if oracle else beta * sigma2
+        for j in range(d):
+            q = 0
+            for i in range(m):
+                if keep[i]:
+                    out[c, j, i] = group[c, j, i] - factor * zs[j, q]
+                    q += 1
+    return
+
+
+@njit(cache=True)
+def _estimate_small(group, sigma2, beta, keep, out):  # pragma: no cover - numba
+    """First-pass estimate of a group of fewer patches than dimensions (m - 1 < d),
+    in the m × m Gram matrix: ``P̂ − μ = X V diag(w) Vᵀ`` for the centred group X
+    and the eigenpairs (λ, V) of ``XᵀX / (m − 1)``, ``w = max(λ − β' σ², 0) / λ``
+    with ``β' = β (1 + √(d / (m − 1)))²``, the upper edge of the Marchenko-Pastur
+    law: the noise of d dimensions lies in the m − 1 of the group's span, where its
+    eigenvalues reach that many times σ²."""
+    nc, d, m = group.shape
+    b = beta * (1.0 + np.sqrt(d / (m - 1))) ** 2
+    xs = np.empty((d, m), np.float64)
+    for c in range(nc):
+        for j in range(d):
+            s = 0.0
+            for i in range(m):
+                s += group[c, j, i]
+            mu = s / m
+            for i in range(m):
+                xs[j, i] = group[c, j, i] - mu
+        gram = np.dot(xs.T, xs) / (m - 1)
+        lam, vec = np.linalg.eigh(gram)
+        for k in range(m):
+            w = max(lam[k] - b * sigma2, 0.0) / lam[k] if lam[k] > 0 else 0.0
+            for i in range(m):
+                vec[i, k] *= np.sqrt(w)
+        proj = np.dot(vec, vec.T)  # V diag(w) Vᵀ
+        est = np.dot(xs, proj)
+        for j in range(d):
+            mu = 0.0
+            for i in range(m):
+                mu += group[c, j, i]
+            mu /= m
+            for i in range(m):
+                if keep[i]:
+                    out[c, j, i] = est[j, i] + mu
+    return
+
+
+def band_height(search: int, patch: int) -> int:
+    """Rows of reference positions per band: two bands of one phase never write the
+    same rows (a band writes ``search`` rows above and ``search + patch - 1`` below
+    its own)."""
+    return max(32, 2 * search + patch)
+
+
+@njit(cache=True)
+def _chain(flows, oks, t, cy, cx, radius, step, h, w, pos_y, pos_x, alive):  # pragma: no cover
+    """Follow the centre (cy, cx) of frame t along the consecutive flows, ``step``
+    +1 (forward: ``flows``/``oks`` hold frame s -> s + 1 at index s) or -1 (backward:
+    frame s -> s - 1 at index s - 1); fill pos_y/pos_x/alive for 1..radius."""
+    nf = flows.shape[0] + 1
+    qy = cy
+    qx = cx
+    s = t
+    for j in range(1, radius + 1):
+        alive[j] = False
+        nxt = s + step
+        if nxt < 0 or nxt >= nf:
+            break
+        k = s if step > 0 else s - 1
+        iy = int(np.floor(qy + 0.5))
+        ix = int(np.floor(qx + 0.5))
+        if iy < 0 or iy >= h or ix < 0 or ix >= w or not oks[k, iy, ix]:
+            break
+        qx = qx + flows[k, iy, ix, 0]
+        qy = qy + flows[k, iy, ix, 1]
+        if not (qy > -0.5 and qy < h - 0.5 and qx > -0.5 and qx < w - 0.5):
+            break
+        pos_y[j] = qy
+        pos_x[j] = qx
+        alive[j] = True
+        s = nxt
+    return
+
+
+@njit(cache=True)
+def _sift_down(hd, hs, hf, hy, hx, size):  # pragma: no cover - numba
+    """Restore the max-heap order (by distance, then sequence number) from the root."""
+    i = 0
+    while True:
+        a = 2 * i + 1
+        if a >= size:
+            return
+        b = a + 1
+        big = a
+        if b < size and (hd[b] > hd[a] or (hd[b] == hd[a] and hs[b] > hs[a])):
+            big = b
+        if hd[big] > hd[i] or (hd[big] == hd[i] and hs[big] > hs[i]):
+            hd[i], hd[big] = hd[big], hd[i]
+            hs[i], hs[big] = hs[big], hs[i]
+            hf[i], hf[big] = hf[big], hf[i]
+            hy[i], hy[big] = hy[big], hy[i]
+            hx[i], hx[big] = hx[big], hx[i]
+            i = big
+        else:
+            return
+
+
+@njit(cache=True)
+def _push(hd, hs, hf, hy, hx, size, cap, dist, seq, f, y, x):  # pragma: no cover - numba
+    """Offer a candidate to the max-heap of the ``cap`` nearest; return the new size.
+    Candidates come in increasing ``seq``, so a tie with the worst kept one loses."""
+    if size < cap:
+        i = size
+        hd[i] = dist
+        hs[i] = seq
+        hf[i] = f
+        hy[i] = y
+        hx[i] = x
+        while i > 0:  # sift up
+            parent = (i - 1) // 2
+            if hd[i] > hd[parent] or (hd[i] == hd[parent] and hs[i] > hs[parent]):
+                hd[i], hd[parent] = hd[parent], hd[i]
+                hs[i], hs[parent] = hs[parent], hs[i]
+                hf[i], hf[parent] = hf[parent], hf[i]
+                hy[i], hy[parent] = hy[parent], hy[i]
+                hx[i], hx[parent] = hx[parent], hx[i]
+                i = parent
+            else:
+                break
+        return size + 1
+    if dist < hd[0]:
+        hd[0] = dist
+        hs[0] = seq
+        hf[0] = f
+        hy[0] = y
+        hx[0] = x
+        _sift_down(hd, hs, hf, hy, hx, size)
+    return size
+
+
+@njit(cache=True)
+def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch, stride,
+          search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2, beta,
+          flat, acc, weight, done):  # pragma: no cover - numba
+    """One band of reference rows [y_lo, y_hi) of frame t (see the module)."""
+    nf, h, w, nc = noisy.shape
+    d = patch * patch
+    half = (patch - 1) // 2
+    hd = np.empty(n_similar, np.float64)
+    hs = np.empty(n_similar, np.int64)
+    hf = np.empty(n_similar, np.int32)
+    hy = np.empty(n_similar, np.int32)
+    hx = np.empty(n_similar, np.int32)
+    pos_y = np.empty(radius + 1, np.float64)
+    pos_x = np.empty(radius + 1, np.float64)
+    alive = np.zeros(radius + 1, np.bool_)
+    group_ws = np.empty((nc, d, n_similar), np.float32)
+    pilot_ws = np.empty((nc, d, n_similar), np.float32)
+    est_ws = np.empty((nc, d, n_similar), np.float32)
+    keep_ws = np.zeros(n_similar, np.bool_)
+    cov = np.zeros((d, d), np.float64)
+    low = np.zeros((d, d), np.float64)
+    vec = np.zeros((2, d), np.float64)
+    ymax = h - patch
+    xmax = w - patch
+    for y in range(y_lo, min(y_hi, ymax + 1)):
+        if not (y % stride == 0 or y == ymax):
+            continue
+        for x in range(0, xmax + 1):
+            if not (x % stride == 0 or x == xmax):
+                continue
+            if done[t, y, x]:
+                continue
+            # candidates in a fixed order (the reference itself first, then frame
+            # t's window, then the windows along the flows) into a max-heap of the
+            # n_similar nearest; a distance reaching the worst kept one is abandoned
+            size = _push(hd, hs, hf, hy, hx, 0, n_similar, -1.0, 0, t, y, x)
+            seq = 1
+            for side in range(2):
+                fr_step = 1 if side == 0 else -1
+                if radius > 0:
+                    if side == 0:
+                        _chain(fwd, fwd_ok, t, y + half, x + half, radius, 1, h, w,
+                               pos_y, pos_x, alive)
+                    else:
+                        _chain(bwd, bwd_ok, t, y + half, x + half, radius, -1, h, w,
+                               pos_y, pos_x, alive)
+                for j in range(0 if side == 0 else 1, radius + 1):
+                    if j == 0:
+                        f = t
+                        oy = y
+                        ox = x
+                        win = search
+                    else:
+                        if not alive[j]:
+                            break
+                        f = t + fr_step * j
+                        oy = int(np.floor(pos_y[j] + 0.5)) - half
+                        ox = int(np.floor(pos_x[j] + 0.5)) - half
+                        win = search_t
+                    for yy in range(max(0, oy - win), min(ymax, oy + win) + 1):
+                        for xx in range(max(0, ox - win), min(xmax, ox + win) + 1):
+                            if f == t and yy == y and xx == x:
+                                continue
+                            seq += 1
+                            limit = hd[0] if size == n_similar else np.inf
+                            dist = 0.0
+                            for py in range(patch):
+                                for px in range(patch):
+                                    for c in range(dist_channels):
+                                        diff = (guide[f, yy + py, xx + px, c]
+                                                - guide[t, y + py, x + px, c])
+                                        dist += diff * diff
+                                if dist >= limit:
+                                    break
+                            if dist < limit:
+                                size = _push(hd, hs, hf, hy, hx, size, n_similar, dist,
+                                             seq, f, yy, xx)
+            m = size
+            if tau > 0:  # only the candidates within tau of the reference, nearest first
+                for i in range(1, m):  # insertion sort by (distance, sequence)
+                    j = i
+                    while j > 0 and (hd[j - 1] > hd[j] or (hd[j - 1] == hd[j]
+                                                           and hs[j - 1] > hs[j])):
+                        hd[j - 1], hd[j] = hd[j], hd[j - 1]
+                        hs[j - 1], hs[j] = hs[j], hs[j - 1]
+                        hf[j - 1], hf[j] = hf[j], hf[j - 1]
+                        hy[j - 1], hy[j] = hy[j], hy[j - 1]
+                        hx[j - 1], hx[j] = hx[j], hx[j - 1]
+                        j -= 1
+                limit = tau * sigma2 * d * dist_channels
+                kept = 0
+                while kept < m and hd[kept] <= limit:
+                    kept += 1
+                m = max(kept, min(n_min, m))
+            if m < 2:
+                continue
+            group = group_ws[:, :, :m]
+            pilot = pilot_ws[:, :, :m] if pilot_on else pilot_ws[:, :, :0]
+            keep = keep_ws[:m]
+            for i in range(m):
+                f = hf[i]
+                keep[i] = f == t
+                for py in range(patch):
+                    for px in range(patch):
+                        for c in range(nc):
+                            group[c, py * patch + px, i] = noisy[f, hy[i] + py, hx[i] + px, c]
+                            if pilot_on:
+                                pilot[c, py * patch + px, i] = guide[f, hy[i] + py,
+                                                                     hx[i] + px, c]
+            est = est_ws[:, :, :m]
+            estimate_group(group, pilot, sigma2, beta, flat, keep, est, cov, low, vec)
+            for i in range(m):
+                if not keep[i]:
+                    continue
+                for py in range(patch):
+                    for px in range(patch):
+                        weight[t, hy[i] + py, hx[i] + px] += 1.0
+                        for c in range(nc):
+                            acc[t, hy[i] + py, hx[i] + px, c] += est[c, py * patch + px, i]
+                done[t, hy[i], hx[i]] = True
+    return
+
+
+@njit(cache=True, parallel=True)
+def _phase(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, tasks, band, patch, stride,
+           search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2, beta,
+           flat, acc, weight, done):  # pragma: no cover - numba
+    h = noisy.shape[1]
+    for i in prange(tasks.shape[0]):
+        t = tasks[i, 0]
+        y_lo = tasks[i, 1] * band
+        y_hi = min(y_lo + band, h)
+        _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch,
+              stride, search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2,
+              beta, flat, acc, weight, done)
+
+
+def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.ndarray,
+                 bwd: np.ndarray, fwd_ok: np.ndarray, bwd_ok: np.ndarray, *, sigma: float,
+                 patch: int, stride: int, search: int, search_t: int, radius: int,
+                 n_similar: int, beta: float, flat: float, dist_channels: int = 0,
+                 tau: float = 0.0, n_min: int = 2,
+                 frames: np.ndarray | None = None) -> np.ndarray:
+    """One NL-Bayes pass over a clip (see the module).
+
+    Parameters
+    ----------
+    noisy, guide : ndarray, shape (F, H, W, C), float32
+        The noisy clip and the clip the patches are compared on (the noisy clip in
+        the first pass, the first estimate in the second).
+    oracle : bool
+        Second pass: the guide's groups give the statistics.
+    fwd, bwd : ndarray, shape (F - 1, H, W, 2), float32
+        Flows frame s -> s + 1 and s + 1 -> s at index s (zeros and
+        ``radius = 0`` for a single frame).
+    fwd_ok, bwd_ok : ndarray, shape (F - 1, H, W), bool
+        Where each flow passed the forward-backward check.
+    sigma : float
+        Noise standard deviation (units of the values).
+    patch, stride, search, search_t, radius, n_similar, beta, flat
+        See :class:`varflow.restore.methods.NLBayesParams`.
+    dist_channels : int
+        The patches are compared on the first ``dist_channels`` channels (the
+        luminance alone with 1); 0: all.
+    tau : float
+        Of the ``n_similar`` nearest, only those within ``tau σ²`` per compared
+        value of the reference join its group (at least ``n_min``); 0: all.
+    n_min : int
+        The smallest group under ``tau``.
+    frames : ndarray of int, optional
+        The frames to estimate (default all); the others are left as zeros.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, C), float32
+    """
+    nf, h, w, nc = noisy.shape
+    band = band_height(search, patch)
+    nbands = -(-h // band)
+    todo = np.arange(nf) if frames is None else np.asarray(frames, np.int64)
+    acc = np.zeros((nf, h, w, nc), np.float32)
+    weight = np.zeros((nf, h, w), np.float32)
+    done = np.zeros((nf, h, w), np.bool_)
+    if fwd.shape[0] == 0:
+        fwd = np.zeros((1, h, w, 2), np.float32)
+        bwd = fwd
+        fwd_ok = np.zeros((1, h, w), np.bool_)
+        bwd_ok = fwd_ok
+        radius = 0
+    args = (np.ascontiguousarray(noisy, np.float32), np.ascontiguousarray(guide, np.float32),
+            bool(oracle), np.ascontiguousarray(fwd, np.float32),
+            np.ascontiguousarray(bwd, np.float32), np.ascontiguousarray(fwd_ok),
+            np.ascontiguousarray(bwd_ok))
+    for parity in (0, 1):
+        tasks = np.array([(t, b) for t in todo for b in range(parity, nbands, 2)],
+                         np.int64).reshape(-1, 2)
+        if len(tasks):
+            _phase(*args, tasks, band, patch, stride, search, search_t, radius, n_similar,
+                   dist_channels if 0 < dist_channels <= nc else nc, float(tau), int(n_min),
+                   float(sigma) ** 2, float(beta), float(flat), acc, weight, done)
+    out = np.zeros_like(acc)
+    np.divide(acc, weight[..., None], out=out, where=weight[..., None] > 0)
+    return out

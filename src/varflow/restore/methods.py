@@ -1,0 +1,213 @@
+"""The restoration methods, registered in :data:`varflow.registry.RESTORE`.
+
+Each :class:`~varflow.registry.Restorer` names its parameter defaults (a frozen
+dataclass) and its ``run`` function; :func:`varflow.restore.denoise.denoise` (re-exported
+as :func:`varflow.denoise`) runs one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from .._validate import check_field
+from ..registry import RESTORE, MemoryFactors, Restorer
+from ..twoframe.methods import FlowComposed
+from ..twoframe.params import TVL1Params
+
+__all__ = ["DEFAULT_RESTORER", "NLBayesParams", "fast_defaults", "get_restorer",
+           "make_restore_params"]
+
+
+@dataclass(frozen=True)
+class NLBayesParams(FlowComposed):
+    """Parameters of ``nlbayes``: motion-compensated NL-Bayes (Arias & Morel 2018).
+
+    For every reference patch, the most similar patches are searched in the frame
+    and along the flows in the ``radius`` frames each side (the chain stops where
+    the forward-backward check fails: hidden neighbours are never used); each
+    group is estimated by an empirical Wiener filter in the eigenbasis of its
+    covariance (:mod:`varflow.restore._nlbayes`), first from the noisy group, then
+    ("final" pass) with the statistics of the first estimate.  Colour frames are
+    processed in an orthonormal opponent space (the noise stays white with the
+    same σ).
+
+    Attributes
+    ----------
+    radius : int
+        Frames searched each side of the reference frame, along the flows (the
+        temporal radius); 0 denoises each frame alone.  Default 5.
+    patch : int
+        Side of the square patches of the first pass, pixels (d = patch² values
+        per channel).  Default 5.
+    patch_final : int
+        Side of the patches of the final pass, pixels.  Default 7.
+    n_similar : int
+        Patches per group in the first pass (N₁; at least 2, and above patch² for
+        a well-posed covariance).  Default 90.
+    n_similar_final : int
+        Patches per group in the final pass (N₂).  Default 90.
+    search : int
+        Half-side of the search window in the reference frame, pixels
+        (a (2·search + 1)² window).  Default 7.
+    search_t : int
+        Half-side of the search window in the other frames, around where the
+        flows carry the reference patch, pixels.  Default 4.
+    tau : float
+        Of the ``n_similar`` nearest patches, the first pass keeps those within
+        ``tau σ²`` per value of the reference (two noisy copies of one patch are
+        ``2 σ²`` apart on average): a texture unlike its surroundings is averaged
+        with its own copies along the motion only, not with look-alikes; 0 keeps
+        all ``n_similar``.  Groups of fewer patches than values are estimated in
+        their Gram matrix.  Default 4.
+    tau_final : float
+        The same in the final pass, on the first estimate (whose copies of one
+        patch are much closer than ``2 σ²``).  Default 1.
+    stride : int
+        Step between reference patches, pixels (at most the patch side, so
+        every pixel is covered); positions already covered by an estimated
+        patch are skipped.  Default 3.
+    beta : float
+        β, the multiple of σ² taken off the group's eigenvalues in the first
+        pass.  Default 1.
+    flat : float
+        γ of the homogeneous-area rule: a group whose variance is below γ σ² is
+        replaced by its mean; 0 turns the rule off.  Default 1.05.
+    passes : int
+        1 (the first estimate only) or 2 (with the final pass).  Default 2.
+    flow_method : str
+        The two-frame method of the flows between consecutive frames.
+        Default ``"tvl1-fast"``.
+    flow_params : TVL1Params or None
+        Its parameters (None: its defaults).
+    flow_blur : float
+        σ of the Gaussian (pixels) that smooths the noisy frames before their
+        flows are estimated (both passes use these flows).  Default 1.
+    flow_max_pixels : int
+        Frames of more pixels than this get their flows on a reduced copy (the
+        search window absorbs the coarser flow); 0: never.  Default 0.
+    fb_tolerance : float
+        α₂ of the forward-backward check (px², :func:`varflow.consistency`).
+        Default 0.5.
+    grain : float
+        The fraction of the removed noise put back (0: the full estimate, 1: the
+        input): film grain instead of a waxy look.  Default 0.
+    """
+
+    radius: int = 5
+    patch: int = 5
+    patch_final: int = 7
+    n_similar: int = 90
+    n_similar_final: int = 90
+    search: int = 7
+    search_t: int = 4
+    tau: float = 4.0
+    tau_final: float = 1.0
+    stride: int = 3
+    beta: float = 1.0
+    flat: float = 1.05
+    passes: int = 2
+    flow_method: str = "tvl1-fast"
+    flow_params: TVL1Params | None = None
+    flow_blur: float = 1.0
+    flow_max_pixels: int = 0
+    fb_tolerance: float = 0.5
+    grain: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+
+        def integer(name: str, low: int, high: int | None = None) -> int:
+            v = getattr(self, name)
+            ok = isinstance(v, int) and not isinstance(v, bool) and v >= low and (
+                high is None or v <= high)
+            rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+            check_field(ok, name, f"must be an integer {rng}, got {v!r}")
+            return v
+
+        def number(name: str, low: float, high: float | None = None) -> None:
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(
+                v) and v >= low and (high is None or v <= high)
+            rng = f">= {low:g}" if high is None else f"in [{low:g}, {high:g}]"
+            check_field(ok, name, f"must be a finite number {rng}, got {v!r}")
+
+        integer("radius", 0, 16)
+        patch = integer("patch", 2, 16)
+        integer("patch_final", 2, 16)
+        integer("n_similar", 2)
+        integer("n_similar_final", 2)
+        integer("search", 1, 64)
+        integer("search_t", 0, 64)
+        stride = integer("stride", 1)
+        check_field(stride <= min(patch, self.patch_final), "stride",
+                    f"must be at most the patch sides ({min(patch, self.patch_final)}), "
+                    f"got {stride}")
+        integer("passes", 1, 2)
+        integer("flow_max_pixels", 0)
+        number("beta", 0.0)
+        number("flat", 0.0)
+        number("tau", 0.0)
+        number("tau_final", 0.0)
+        number("flow_blur", 0.0)
+        number("fb_tolerance", 0.0)
+        number("grain", 0.0, 1.0)
+
+
+def fast_defaults() -> NLBayesParams:
+    """The ``nlbayes-fast`` preset: one pass, radius 2, a sparser reference grid and
+    flows on frames reduced to at most 150 000 pixels (groups keep nlbayes' size:
+    fewer patches than a colour patch has values weaken the estimate)."""
+    return NLBayesParams(radius=2, passes=1, stride=4, search=5, flow_max_pixels=150_000)
+
+
+def _run(*args: Any, **kwargs: Any) -> Any:
+    from .denoise import run_nlbayes
+
+    return run_nlbayes(*args, **kwargs)
+
+
+_KERNELS = ("varflow.restore._nlbayes:_phase", "varflow.restore._nlbayes:estimate_group")
+_KNOBS = (
+    ("radius", "frames each side used: more is cleaner on steady footage, slower"),
+    ("grain", "fraction of the noise put back (film grain): 0.1-0.3 keeps texture"),
+    ("flow_method", "the flows' method: tvl1 for more accurate motion, slower"),
+)
+
+RESTORE.register(Restorer(
+    name="nlbayes",
+    description="motion-compensated NL-Bayes: space-time patch groups along the flows, "
+    "two Wiener passes (Arias & Morel 2018)",
+    defaults=NLBayesParams,
+    memory=MemoryFactors(base=0, per_frame=120),
+    kernels=_KERNELS,
+    compile_seconds=30,
+    use="the best quality: noisy video, low light, film grain",
+    knobs=_KNOBS,
+    run=_run,
+))
+RESTORE.register(Restorer(
+    name="nlbayes-fast",
+    description="nlbayes with one pass, radius 2 and reduced flows",
+    defaults=fast_defaults,
+    memory=MemoryFactors(base=0, per_frame=100),
+    kernels=_KERNELS,
+    compile_seconds=30,
+    use="previews and long clips: several times faster than nlbayes, a little noisier",
+    knobs=_KNOBS,
+    run=_run,
+))
+
+#: The method of :func:`varflow.denoise` when none is named.
+DEFAULT_RESTORER = RESTORE.default
+
+
+def get_restorer(name: str) -> Restorer:
+    """``RESTORE.entry(name)``: a restoration method by name (``ValueError`` if unknown)."""
+    return RESTORE.entry(name)
+
+
+def make_restore_params(method: str | Restorer, params: Any = None, **overrides: Any) -> Any:
+    """``RESTORE.make_params``: a restoration method's parameters."""
+    return RESTORE.make_params(method, params, **overrides)
