@@ -9,11 +9,12 @@ Tables
 ------
 ``tasks``
     One row per task: ``task_id`` (``"<name>/<output file name>"``), ``input``
-    (path), ``name``, ``kind`` (``flow``/``track``/``retime``), ``frames`` (JSON list of frame
-    indices), ``method``, ``params`` (JSON of the parameter dataclass), ``version``
-    (varflow's), ``output`` (path relative to OUT), ``checksum`` (SHA-256 hex of the
-    output once done), ``status``, ``error``, ``seconds`` (compute time),
-    ``attempts`` (times submitted to a worker), ``updated`` (Unix time).
+    (path), ``name``, ``kind`` (``flow``/``track``/``retime``/``denoise``), ``frames``
+    (JSON list of frame indices), ``method``, ``params`` (JSON of the parameter
+    dataclass), ``version`` (varflow's), ``output`` (path relative to OUT),
+    ``checksum`` (SHA-256 hex of the output once done), ``status``, ``error``,
+    ``seconds`` (compute time), ``attempts`` (times submitted to a worker),
+    ``updated`` (Unix time).
 
     ``status`` is ``pending`` (planned), ``running`` (submitted, result not yet
     recorded), ``done`` or ``failed``.  An input that could not be opened at all

@@ -23,6 +23,12 @@ Retiming (``varflow batch retime``)
     One task per input: the whole video (or frame folder) retimed with
     :func:`varflow.retime.stream.retime_video` (``--fps F`` or ``--slowmo K``) to
     ``OUT/<name>.<format>`` (``mkv`` by default: lossless FFV1).
+
+Denoising (``varflow batch denoise``)
+    One task per input: the whole video (or frame folder) denoised with
+    :func:`varflow.batch.denoise.denoise_video` (σ given on the 0-255 scale, or
+    estimated per input) to ``OUT/<name>.<format>`` (``mkv`` by default: lossless
+    FFV1; lossless in the other containers where they allow it), audio copied.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +55,8 @@ __all__ = [
 FLOW_FORMATS = ("flo", "png")
 #: Output formats (video containers) of ``varflow batch retime``.
 RETIME_FORMATS = ("mkv", "mp4", "mov", "avi", "webm", "m4v")
+#: Output formats (video containers) of ``varflow batch denoise``.
+DENOISE_FORMATS = RETIME_FORMATS
 
 
 @dataclass(frozen=True)
@@ -57,15 +66,15 @@ class BatchConfig:
     Attributes
     ----------
     kind : str
-        ``"flow"``, ``"track"`` or ``"retime"``.
+        ``"flow"``, ``"track"``, ``"retime"`` or ``"denoise"``.
     method : str
-        Registered two-frame method (flow), trajectory method (track) or
-        interpolation method (retime).
+        Registered two-frame method (flow), trajectory method (track),
+        interpolation method (retime) or restoration method (denoise).
     params : dataclass instance
         The method's parameters.
     fmt : str
         ``"flo"`` or ``"png"`` for flow; ``"npz"`` for track; a video extension of
-        :data:`RETIME_FORMATS` for retime.
+        :data:`RETIME_FORMATS` for retime, of :data:`DENOISE_FORMATS` for denoise.
     stride : int
         Frame gap of the pairs (flow without ``pairs``).
     pairs : tuple of (int, int), optional
@@ -77,9 +86,15 @@ class BatchConfig:
     slowmo : int, optional
         Slow-motion factor (retime; exactly one of ``fps`` and ``slowmo``).
     input_fps : str, optional
-        Source rate of frame folders / override of the videos' rates (retime).
+        Source rate of frame folders / override of the videos' rates (retime,
+        denoise).
     codec : str, optional
-        Video encoder (retime; default after ``fmt``).
+        Video encoder (retime: default after ``fmt``; denoise: default lossless).
+    sigma : float, optional
+        Noise standard deviation on the 0-255 scale (denoise; None: estimated per
+        input).
+    scene_cuts : bool
+        Search no patch across a scene cut (denoise).
     """
 
     kind: str
@@ -94,6 +109,8 @@ class BatchConfig:
     slowmo: int | None = None
     input_fps: str | None = None
     codec: str | None = None
+    sigma: float | None = None
+    scene_cuts: bool = True
 
     def __post_init__(self) -> None:
         if self.kind == "flow":
@@ -118,6 +135,13 @@ class BatchConfig:
                 raise ValueError("give exactly one of --fps and --slowmo")
             if self.slowmo is not None and (isinstance(self.slowmo, bool) or self.slowmo < 2):
                 raise ValueError(f"--slowmo: must be an integer >= 2, got {self.slowmo}")
+        elif self.kind == "denoise":
+            if self.fmt not in DENOISE_FORMATS:
+                raise ValueError(f"--format: expected one of {', '.join(DENOISE_FORMATS)}")
+            s = self.sigma
+            if s is not None and (isinstance(s, bool) or not isinstance(s, int | float)
+                                  or not math.isfinite(s) or s < 0):
+                raise ValueError(f"--sigma: must be a finite number >= 0, got {s!r}")
         else:
             raise ValueError(f"unknown batch kind {self.kind!r}")
 
@@ -143,6 +167,9 @@ class BatchConfig:
         elif self.kind == "retime":
             ident.update({"fps": self.fps, "slowmo": self.slowmo, "input_fps": self.input_fps,
                           "codec": self.codec})
+        elif self.kind == "denoise":
+            ident.update({"sigma": self.sigma, "input_fps": self.input_fps,
+                          "codec": self.codec, "scene_cuts": self.scene_cuts})
         else:
             ident["window"] = self.window
             ident["overlap"] = self.overlap
@@ -178,7 +205,7 @@ class Task:
         The input's output name.
     frames : tuple of int
         ``(i, j)`` for a pair (flow from frame i to frame j), the window's frame
-        indices for track, the first and last frame for retime.
+        indices for track, the first and last frame for retime and denoise.
     output : str
         Output path relative to the output folder (``/``-separated).
     index : int
@@ -326,9 +353,11 @@ def plan_tasks(name: str, n_frames: int, config: BatchConfig) -> list[Task]:
         When the input is too short to give any task.
     """
     tasks: list[Task] = []
-    if config.kind == "retime":
-        if n_frames < 2:
+    if config.kind in ("retime", "denoise"):
+        if config.kind == "retime" and n_frames < 2:
             raise ValueError(f"only {n_frames} frame(s): retiming needs at least 2")
+        if n_frames < 1:
+            raise ValueError("no frames")
         file = f"{name}.{config.fmt}"
         return [Task(f"{name}/{file}", name, (0, n_frames - 1), file, 0)]
     if config.kind == "flow":

@@ -94,7 +94,7 @@ class BatchSummary:
     seconds : float
         Wall time of the computing phase.
     unit : str
-        ``"pairs"``, ``"windows"`` or ``"videos"`` (retime).
+        ``"pairs"``, ``"windows"`` or ``"videos"`` (retime, denoise).
     failures : list of (str, str)
         ``(task_id, error)`` of every failure.
     """
@@ -175,7 +175,7 @@ def _clean_stale(out: Path, names: Sequence[str], kind: str = "flow") -> int:
     """Delete temporary files of killed writers; returns how many."""
     count = 0
     for name in names:
-        if kind == "retime":  # OUT/.<name>.XXXX.<ext> of the video writer
+        if kind in ("retime", "denoise"):  # OUT/.<name>.XXXX.<ext> of the video writer
             for p in out.glob(f".{glob.escape(name)}.*"):
                 if p.is_file():
                     p.unlink(missing_ok=True)
@@ -303,7 +303,7 @@ def _sink_write(sink: Any, task: Task, manifest: Manifest, summary: BatchSummary
 def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
                version: str) -> WorkItem:
     source: str | tuple[str, ...]
-    if pl.probe.files is not None and config.kind != "retime":
+    if pl.probe.files is not None and config.kind not in ("retime", "denoise"):
         source = tuple(pl.probe.files[i] for i in task.frames)
     else:
         source = str(pl.inp.path)
@@ -320,6 +320,9 @@ def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
         retime=None if config.kind != "retime" else {
             "fps": config.fps, "slowmo": config.slowmo, "input_fps": config.input_fps,
             "codec": config.codec},
+        denoise=None if config.kind != "denoise" else {
+            "sigma": config.sigma, "input_fps": config.input_fps, "codec": config.codec,
+            "scene_cuts": config.scene_cuts},
     )
 
 
@@ -437,7 +440,7 @@ def run_batch(
     command: Any = None,
     max_in_flight: int | None = None,
 ) -> BatchSummary:
-    """Run (or resume) a batch of flow or trajectory tasks.
+    """Run (or resume) a batch of flow, trajectory, retime or denoise tasks.
 
     Parameters
     ----------

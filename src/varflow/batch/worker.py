@@ -3,7 +3,8 @@
 A task reads only the frames it needs (a video is opened with
 ``read_frames(path, start=..., stop=..., step=...)``, a frame folder by the task's
 own frame files; a retime task streams its whole input through
-:func:`varflow.retime.stream.retime_video`), writes its output with the atomic
+:func:`varflow.retime.stream.retime_video`, a denoise task through
+:func:`varflow.batch.denoise.denoise_video`), writes its output with the atomic
 writers of :mod:`varflow.io` and returns a small result dictionary; it never touches the manifest.
 
 Threads: every task runs single-threaded (Numba, OpenCV); a worker runs as many
@@ -98,7 +99,7 @@ class WorkItem:
     ----------
     task_id : str
     kind : str
-        ``"flow"``, ``"track"`` or ``"retime"``.
+        ``"flow"``, ``"track"``, ``"retime"`` or ``"denoise"``.
     method : str
     params : dataclass instance
     source : str or tuple of str
@@ -116,6 +117,9 @@ class WorkItem:
     retime : dict, optional
         ``fps``, ``slowmo``, ``input_fps``, ``codec`` of a retime task (``source``
         is then the video or the frame folder).
+    denoise : dict, optional
+        ``sigma``, ``input_fps``, ``codec``, ``scene_cuts`` of a denoise task
+        (``source`` is then the video or the frame folder).
     """
 
     task_id: str
@@ -129,6 +133,7 @@ class WorkItem:
     metadata: dict[str, Any] = field(default_factory=dict)
     threads: int = 1
     retime: dict[str, Any] | None = None
+    denoise: dict[str, Any] | None = None
 
 
 def sha256_file(path: str | os.PathLike[str]) -> str:
@@ -175,6 +180,13 @@ def _compute(item: WorkItem) -> None:
         assert item.retime is not None and isinstance(item.source, str)
         out.parent.mkdir(parents=True, exist_ok=True)
         retime_video(item.source, out, method=item.method, params=item.params, **item.retime)
+        return
+    if item.kind == "denoise":
+        from .denoise import denoise_video
+
+        assert item.denoise is not None and isinstance(item.source, str)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        denoise_video(item.source, out, method=item.method, params=item.params, **item.denoise)
         return
     frames = _read(item)
     out.parent.mkdir(parents=True, exist_ok=True)

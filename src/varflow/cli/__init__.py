@@ -2,10 +2,12 @@
 
 Commands, each with its synopsis in the notes of its module (and ``varflow
 COMMAND --help``): ``flow``, ``show``, ``eval``, ``demo`` and ``methods``
-(:mod:`~varflow.cli.flow`); ``track`` (:mod:`~varflow.cli.track`); ``bench middlebury
-| middlebury-multiframe | trajectories | twoframe | sintel-trajectories``
-(:mod:`~varflow.cli.bench`); ``video`` (:mod:`~varflow.cli.video`); ``batch flow |
-track`` (:mod:`~varflow.cli.batch`); ``report`` (:mod:`~varflow.cli.report`).
+(:mod:`~varflow.cli.flow`); ``track`` (:mod:`~varflow.cli.track`); ``interpolate`` and
+``retime`` (:mod:`~varflow.cli.interpolate`); ``denoise`` (:mod:`~varflow.cli.denoise`);
+``bench middlebury | middlebury-multiframe | trajectories | twoframe |
+sintel-trajectories`` (:mod:`~varflow.cli.bench`); ``video`` (:mod:`~varflow.cli.video`);
+``batch flow | track | retime | denoise`` (:mod:`~varflow.cli.batch`); ``report``
+(:mod:`~varflow.cli.report`).
 
 Method parameters become flags automatically: every field of the parameter
 dataclass of every registered method is offered as ``--field-name`` (booleans as
@@ -25,6 +27,7 @@ options every command has, ``-v``; ``argv``: the command line, so that ``--help`
 can show the defaults of the ``--method``/``--methods`` it names), called by
 :func:`build_parser` in the order of ``varflow --help``:
 :mod:`~varflow.cli.flow` (flow, show, eval, demo, methods), :mod:`~varflow.cli.track`,
+:mod:`~varflow.cli.interpolate` (interpolate, retime), :mod:`~varflow.cli.denoise`,
 :mod:`~varflow.cli.bench`, :mod:`~varflow.cli.video`, :mod:`~varflow.cli.batch` and
 :mod:`~varflow.cli.report`.  A new command (e.g. ``interpolate``, ``retime``) gets a
 module of its own, added to :func:`build_parser`.  The library never imports
@@ -83,9 +86,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                         help="log to stderr: -v INFO, -vv DEBUG")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
                                 parser_class=_Parser)
-    from . import batch, bench, flow, interpolate, report, track, video
+    from . import batch, bench, denoise, flow, interpolate, report, track, video
 
-    for module in (flow, track, interpolate, bench, video, batch, report):  # add_parser(...)
+    for module in (flow, track, interpolate, denoise, bench, video, batch, report):
         module.add_parser(sub, common, argv)
     return parser
 

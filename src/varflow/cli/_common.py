@@ -299,8 +299,8 @@ def _add_param_flags(
     params : dict
         From :func:`_collect_params` of ``registry``.
     registry : Registry
-        :data:`~varflow.registry.METHODS`, :data:`~varflow.registry.TRACKERS` or
-        :data:`~varflow.registry.INTERPOLATORS`.
+        :data:`~varflow.registry.METHODS`, :data:`~varflow.registry.TRACKERS`,
+        :data:`~varflow.registry.INTERPOLATORS` or :data:`~varflow.registry.RESTORE`.
     chosen : sequence of str, optional
         Methods named on the command line (:func:`chosen_methods`).
     """
@@ -363,12 +363,14 @@ def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, An
 
 def _entry(method: str) -> Any:
     """The registered entry named ``method``, of any kind (two-frame flow first)."""
-    from ..registry import INTERPOLATE
+    from ..registry import INTERPOLATE, RESTORE
 
     if method in TRACKERS:
         return TRACKERS[method]
     if method in INTERPOLATE:
         return INTERPOLATE[method]
+    if method in RESTORE:
+        return RESTORE[method]
     return get_method(method)
 
 
@@ -383,11 +385,11 @@ def _field_range(entry: Any, name: str, default: Any) -> str:
     an unknown word) and reading the range from its message, so the table and the
     check cannot disagree; "" when the check takes any value.
     """
-    from ..registry import FLOW, INTERPOLATE, TRACK
+    from ..registry import FLOW, INTERPOLATE, RESTORE, TRACK
 
     if isinstance(default, bool):
         return "on/off"
-    registry = next(r for r in (FLOW, TRACK, INTERPOLATE) if r.get(entry.name) is entry)
+    registry = next(r for r in (FLOW, TRACK, INTERPOLATE, RESTORE) if r.get(entry.name) is entry)
     probe: Any = "\x00?" if isinstance(default, str) else float("nan")
     try:
         registry.make_params(entry, **{name: probe})
@@ -427,7 +429,7 @@ def parameter_rows(method: str) -> list[tuple[str, str, str, str]]:
     Parameters
     ----------
     method : str
-        A registered two-frame, trajectory or interpolation method name.
+        A registered two-frame, trajectory, interpolation or restoration method name.
 
     Returns
     -------
@@ -453,7 +455,7 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     Parameters
     ----------
     method : str
-        A registered two-frame, trajectory or interpolation method name.
+        A registered two-frame, trajectory, interpolation or restoration method name.
     markdown : bool
         A Markdown table instead of aligned text.
 
@@ -488,7 +490,7 @@ def method_card(method: str, width: int | None = None) -> str:
     Parameters
     ----------
     method : str
-        A registered two-frame, trajectory or interpolation method name.
+        A registered two-frame, trajectory, interpolation or restoration method name.
     width : int, optional
         Line width; the terminal's (``COLUMNS``), at least 80, by default.
 
@@ -564,18 +566,24 @@ class _Progress:
         self.bar.close()
 
 
-def _compile_notice(method: str, quiet: bool) -> None:
+def _compile_notice(method: str, quiet: bool, entry: Any = None) -> None:
     """Say on stderr that this run compiles the kernels, when Numba's cache is cold.
 
     Only when :func:`varflow._jit.kernels_cached` is sure they are not cached (the
-    first run of ``method`` on this machine); nothing with ``--quiet``.
+    first run of ``method`` on this machine); nothing with ``--quiet``.  ``entry``: a
+    registered entry whose kernels come on top of those of ``method``, its flow
+    method (a restoration method).
     """
     if quiet:
         return
     from .._jit import compile_seconds, kernels_cached
 
-    if kernels_cached(method) is False:
-        seconds = compile_seconds(method)
+    cold = kernels_cached(method) is False
+    seconds = (compile_seconds(method) or 0) if cold else 0
+    if entry is not None and kernels_cached(kernels=entry.kernels) is False:
+        cold = True
+        seconds += entry.compile_seconds or 0
+    if cold:
         about = f", about {seconds} s" if seconds else ""
         print(f"{PROG}: compiling kernels, once per machine{about}", file=sys.stderr,
               flush=True)

@@ -1,4 +1,4 @@
-"""``varflow batch``: flow or trajectories for many inputs on Dask (:mod:`varflow.batch`).
+"""``varflow batch``: flow, trajectories, retiming or denoising of many inputs on Dask.
 
 Synopsis::
 
@@ -13,9 +13,14 @@ Synopsis::
                          [--input-fps R] [--format mkv|mp4|...] [--codec C]
                          [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
                          [--overwrite] [--quiet] [--<parameter> VALUE ...]
+    varflow batch denoise INPUT... -o OUT [--sigma S] [--method M] [--input-fps R]
+                          [--format mkv|mp4|...] [--codec C] [--no-scene-cuts]
+                          [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
+                          [--overwrite] [--quiet] [--<parameter> VALUE ...]
 
-Needs the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``);
-without it the command stops with one line naming the extra.
+The work is done by :mod:`varflow.batch` (one task per input for ``retime`` and
+``denoise``).  Needs the ``batch`` extra (dask, distributed, zarr: ``pip install
+"varflow[batch]"``); without it the command stops with one line naming the extra.
 
 Exit status: 0 when every task is done, 1 when some input or task failed (after
 all the others finished; the failures are listed on stderr and in the manifest),
@@ -30,7 +35,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..registry import METHODS, TRACKERS, get_method, get_tracker, make_params, make_track_params
+from ..registry import (
+    METHODS,
+    RESTORE,
+    TRACKERS,
+    get_method,
+    get_tracker,
+    make_params,
+    make_track_params,
+)
 from ..retime.methods import (
     DEFAULT_INTERPOLATOR,
     INTERPOLATORS,
@@ -46,8 +59,11 @@ from ._common import (
     _Progress,
     chosen_methods,
     int_at_least,
+    methods_epilog,
     rate_arg,
 )
+from .denoise import SIGMA_HELP, sigma_arg
+from .denoise import resolve as resolve_denoise
 
 __all__ = ["add_parser", "require_batch_extra"]
 
@@ -56,11 +72,12 @@ BATCH_EXTRA = ("dask", "distributed", "zarr")
 
 _DESCRIPTION = (
     "Compute flow between frame pairs (flow), trajectories over windows of frames "
-    "(track) or retimed videos (retime) for many inputs on Dask: a local cluster of "
+    "(track), retimed videos (retime) or denoised videos (denoise) for many inputs on "
+    "Dask: a local cluster of "
     "--workers processes by default, or an existing scheduler.  INPUT is a video, a "
     "folder of frames, a folder of videos, a glob pattern or "
     "an input list (.txt/.lst/.list/.jsonl: one path or {\"path\": ..., \"name\": ...} "
-    "per line); results go to OUT/<name>/ (retime: OUT/<name>.<format>) with <name> the "
+    "per line); results go to OUT/<name>/ (retime, denoise: OUT/<name>.<format>) with <name> the "
     "video's file name without extension or the folder's name (two inputs with one name "
     "are an error).  Every "
     "task is recorded in OUT/manifest.sqlite; running the same command again after an "
@@ -108,12 +125,13 @@ def require_batch_extra() -> None:
 
 
 def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | None) -> None:
-    """Register ``varflow batch flow``, ``varflow batch track`` and ``varflow batch retime``.
+    """Register ``varflow batch flow``, ``track``, ``retime`` and ``denoise``.
 
     The ``add_parser`` protocol of :mod:`varflow.cli` (its notes say what ``sub``,
     ``common`` and ``argv`` are).
     """
-    p = sub.add_parser("batch", help="flow, trajectories or retiming for many videos on Dask",
+    p = sub.add_parser("batch", help="flow, trajectories, retiming or denoising of many videos "
+                       "on Dask",
                        description=_DESCRIPTION)
     bsub = p.add_subparsers(dest="batch_kind", metavar="KIND", required=True,
                             parser_class=_Parser)
@@ -194,6 +212,29 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                      chosen_methods(argv, INTERPOLATORS))
     r.set_defaults(func=_cmd_batch_retime)
 
+    d = bsub.add_parser("denoise", parents=[common, shared],
+                        help="denoised videos: OUT/<name>.<format>",
+                        description="Denoise every input (a video or a folder of frames) "
+                        "with its motion: one task per input, written to OUT/<name>.<format> "
+                        "(as 'varflow denoise': lossless where the container allows it, "
+                        "audio copied, scene cuts not crossed; sigma estimated per input "
+                        "unless --sigma).",
+                        epilog=methods_epilog(RESTORE))
+    d.add_argument("--sigma", type=sigma_arg, metavar="S", help=SIGMA_HELP)
+    d.add_argument("--method", default=RESTORE.default, metavar="NAME",
+                   help=f"one of: {', '.join(RESTORE)} (default {RESTORE.default})")
+    d.add_argument("--input-fps", type=rate_arg, metavar="R",
+                   help="source frame rate (default: the video's own; 25 for a folder)")
+    d.add_argument("--format", default="mkv", metavar="EXT",
+                   help="output container: mkv (lossless FFV1, default), mp4, mov, avi, "
+                   "webm or m4v")
+    d.add_argument("--codec", metavar="C",
+                   help="FFmpeg encoder (default: lossless, after the format)")
+    d.add_argument("--no-scene-cuts", dest="scene_cuts", action="store_false",
+                   help="search patches across scene cuts too (one scene)")
+    _add_param_flags(d, _collect_params(RESTORE), RESTORE, chosen_methods(argv, RESTORE))
+    d.set_defaults(func=_cmd_batch_denoise)
+
 
 def _cmd_batch_flow(args: argparse.Namespace) -> int:
     require_batch_extra()
@@ -229,6 +270,19 @@ def _cmd_batch_retime(args: argparse.Namespace) -> int:
     config = BatchConfig("retime", interp.name, params, fmt=args.format.lower().lstrip("."),
                          fps=_rate_text(args.fps), slowmo=args.slowmo,
                          input_fps=_rate_text(args.input_fps), codec=args.codec)
+    return _run(args, config)
+
+
+def _cmd_batch_denoise(args: argparse.Namespace) -> int:
+    require_batch_extra()
+    from ..batch.plan import BatchConfig
+
+    if args.zarr:
+        raise ValueError("--zarr: not available for batch denoise (its outputs are videos)")
+    entry, params = resolve_denoise(args)
+    config = BatchConfig("denoise", entry.name, params, fmt=args.format.lower().lstrip("."),
+                         input_fps=_rate_text(args.input_fps), codec=args.codec,
+                         sigma=args.sigma, scene_cuts=args.scene_cuts)
     return _run(args, config)
 
 

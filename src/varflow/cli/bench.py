@@ -21,11 +21,16 @@ Synopsis::
                              [--peers minterpolate,blend,repeat|all|none] [--max-cases N]
                              [--timing|--no-timing] [--timing-only] [--timing-repeats N]
                              [--no-per-case] [--data DIR] [--csv OUT.csv] [--quiet]
+    varflow bench denoise [--data DIR] [--clips bikes,carphone,...] [--sigmas 10,30,50]
+                          [--frames 20] [--methods nlbayes,nlbayes-fast]
+                          [--peers opencv-nlm,flow-average,atadenoise,fftdnoiz,per-frame|all|none]
+                          [--crop HxW] [--csv OUT.csv] [--quiet]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -37,6 +42,7 @@ from ._common import (
     _given_params,
     _params_note,
     _Parser,
+    _Progress,
     _split_list,
     chosen_methods,
 )
@@ -260,6 +266,52 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     b.add_argument("--data", metavar="DIR",
                    help="data folder (default $VARFLOW_DATA or ../shared/data)")
     b.set_defaults(func=_cmd_bench_interpolation)
+
+    from ..evaluation.denoising import (
+        DENOISE_PEERS,
+        PROTOCOL_FRAMES,
+        REPORTING_CLIPS,
+        TUNING_CLIPS,
+    )
+    from ..registry import RESTORE
+
+    b = bsub.add_parser("denoise", parents=[common, bench_common],
+                        help="video denoising on the restoration clips against OpenCV NLM, "
+                        "FFmpeg's atadenoise and fftdnoiz, and V-BM3D's figures",
+                        description="The denoising protocol: white Gaussian noise of "
+                        "standard deviation sigma (0-255, seed 0, not clipped) on the first "
+                        "frames of each clip, sigma given to every denoiser.  Runs the "
+                        "restoration methods (varflow.denoise), the first of them (nlbayes "
+                        "when listed) once more with sigma estimated, and the peers: OpenCV's "
+                        "multi-frame NL-means, the flow average (neighbours warped by tvl1 "
+                        "flows and averaged), FFmpeg's atadenoise and fftdnoiz through PyAV "
+                        "(8-bit input) and per-frame (that method with radius 0: no motion). "
+                        "Per clip, sigma and method: PSNR (dB, output clipped to 0-255), "
+                        "SSIM, temporal error (the flicker added), seconds per frame and "
+                        "their ratio to OpenCV NLM's, beside V-BM3D's reference PSNR (runs "
+                        "of the protocol's frames only); then the means over the reporting "
+                        f"clips.  Tuning clips: {', '.join(TUNING_CLIPS)}; reporting clips: "
+                        f"{', '.join(REPORTING_CLIPS)}.")
+    b.add_argument("--clips", default=",".join((*TUNING_CLIPS, *REPORTING_CLIPS)),
+                   metavar="NAMES", help="comma-separated, from: "
+                   f"{','.join((*TUNING_CLIPS, *REPORTING_CLIPS))} (default all)")
+    b.add_argument("--sigmas", default="10,30,50", metavar="S,...",
+                   help="noise levels on 0-255, comma-separated (default 10,30,50: those of "
+                   "V-BM3D's reference)")
+    b.add_argument("--frames", type=int, default=PROTOCOL_FRAMES, metavar="F",
+                   help=f"frames from the start of each clip, at least 2 (default "
+                   f"{PROTOCOL_FRAMES}; sintel-demo has 10)")
+    b.add_argument("--methods", default=None, metavar="NAMES",
+                   help=f"comma-separated, from: {', '.join(RESTORE.names())} (default all; "
+                   "empty to run peers only)")
+    b.add_argument("--peers", default="all", metavar="NAMES",
+                   help=f"comma-separated, from: {','.join(DENOISE_PEERS)}; or all, or none "
+                   "(default all)")
+    b.add_argument("--crop", default=None, metavar="HxW",
+                   help="keep the top-left HxW of every frame (quick runs)")
+    b.add_argument("--data", metavar="DIR",
+                   help="data folder (default $VARFLOW_DATA or ../shared/data)")
+    b.set_defaults(func=_cmd_bench_denoise)
 
 
 def _checked_methods(value: str, lookup, what: str) -> list[str]:
@@ -657,5 +709,92 @@ def _cmd_bench_interpolation(args: argparse.Namespace) -> int:
         from varflow.evaluation.bench.interpolation import INTERPOLATION_CSV_FIELDS
 
         write_csv(rows + timing, csv_path, INTERPOLATION_CSV_FIELDS)
+        print(f"wrote {csv_path}")
+    return 0
+
+
+def _cmd_bench_denoise(args: argparse.Namespace) -> int:
+    from varflow.evaluation.bench.common import write_csv
+    from varflow.evaluation.datasets import data_root
+    from varflow.evaluation.denoising import (
+        DENOISE_CSV_FIELDS,
+        ESTIMATED_SUFFIX,
+        PROTOCOL_FRAMES,
+        check_denoise_clips,
+        check_denoise_peers,
+        check_restore_methods,
+        format_denoise_tables,
+        reference_method,
+        run_denoise_benchmark,
+        unavailable_peers,
+    )
+
+    def option(exc: ValueError) -> ValueError:  # "peers: ..." -> "--peers: ..."
+        arg, _, rest = str(exc).partition(":")
+        names = {"clips": "--clips", "sigmas": "--sigmas", "frames": "--frames",
+                 "methods": "--methods", "peers": "--peers", "crop": "--crop"}
+        return ValueError(f"{names.get(arg, arg)}:{rest}")
+
+    try:
+        sigmas = [float(v) for v in _split_list(args.sigmas)]
+    except ValueError:
+        raise ValueError(f"--sigmas: expected comma-separated noise levels, e.g. 10,30,50, "
+                         f"got {args.sigmas!r}") from None
+    if not sigmas or not all(math.isfinite(v) and v > 0 for v in sigmas):
+        raise ValueError(f"--sigmas: every noise level must be positive, got {args.sigmas!r}")
+    if args.frames < 2:
+        raise ValueError(f"--frames: must be at least 2, got {args.frames}")
+    crop = None
+    if args.crop is not None:
+        try:
+            crop = tuple(int(v) for v in args.crop.lower().split("x"))
+            if len(crop) != 2 or min(crop) < 1:
+                raise ValueError
+        except ValueError:
+            raise ValueError(f"--crop: expected HxW, e.g. 96x128, got {args.crop!r}") from None
+    try:
+        methods = check_restore_methods(args.methods)
+        peers = check_denoise_peers(args.peers)
+    except ValueError as exc:
+        raise option(exc) from None
+    missing = unavailable_peers(peers)
+    peers = [p for p in peers if p not in missing]
+    if not methods and not peers:
+        raise ValueError("--methods: give at least one restoration method or available peer")
+    csv_path = _check_output(args.csv, (".csv",), "--csv") if args.csv else None
+    root = data_root(args.data)
+    try:
+        clips = check_denoise_clips(root, args.clips, crop)  # before any output
+    except ValueError as exc:
+        raise option(exc) from None
+    sigma_text = ", ".join(f"{v:g}" for v in sigmas)
+    crop_note = f", top-left {crop[0]}x{crop[1]} (HxW)" if crop else ""
+    ref = reference_method(methods)
+    notes = []
+    if methods:
+        notes.append(f"'{ref}{ESTIMATED_SUFFIX}': {ref} given no sigma")
+    if "per-frame" in peers:
+        notes.append(f"per-frame: {ref} with radius 0")
+    protocol = crop is None and args.frames == PROTOCOL_FRAMES
+    print(f"Video denoising ({', '.join(clips)}; sigma {sigma_text}; first {args.frames} "
+          f"frames{crop_note}): white Gaussian noise on 0-255 RGB, seed 0, not clipped.  "
+          f"PSNR (dB) of the output clipped to 0-255, mean over frames; SSIM (scikit-image, "
+          f"7x7 window, data range 255); temp. err: RMS of the frame-to-frame change of "
+          f"the error (0-255); s/frame: wall time per frame, JIT warm-up excluded; x NLM: "
+          f"time over OpenCV NLM's; V-BM3D PSNR: reference figures"
+          + ("" if protocol else " (only on the protocol's 20 uncropped frames)")
+          + (f"; {'; '.join(notes)}" if notes else "") + f"; data {root}")
+    for p, reason in missing.items():
+        print(f"peer {p} unavailable: {reason}")
+    with _Progress("denoise", args.quiet, unit="run") as bar:
+        try:
+            rows = run_denoise_benchmark(root, clips, sigmas, args.frames, methods, peers,
+                                         crop=crop, callback=bar)
+        except ValueError as exc:
+            raise option(exc) from None
+    print()
+    print(format_denoise_tables(rows))
+    if csv_path is not None:
+        write_csv(rows, csv_path, DENOISE_CSV_FIELDS)
         print(f"wrote {csv_path}")
     return 0
