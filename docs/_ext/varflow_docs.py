@@ -31,10 +31,12 @@ HELP_COLUMNS = 88
 
 
 def registries() -> dict[str, dict[str, Any]]:
-    """The method registries by kind: two-frame flow, trajectories, interpolation."""
-    from varflow.registry import FLOW, INTERPOLATE, TRACK
+    """The method registries by kind: two-frame flow, trajectories, interpolation,
+    restoration."""
+    from varflow.registry import FLOW, INTERPOLATE, RESTORE, TRACK
 
-    return {"twoframe": FLOW, "trajectories": TRACK, "interpolation": INTERPOLATE}
+    return {"twoframe": FLOW, "trajectories": TRACK, "interpolation": INTERPOLATE,
+            "restoration": RESTORE}
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
@@ -175,13 +177,15 @@ def api_page() -> str:
     lines += title("Registries", "-")
     lines += ["One registry per kind of method, which the command line, the benchmarks and",
               "these pages read: ``varflow.registry.FLOW`` (two-frame flow),",
-              "``varflow.registry.TRACK`` (trajectories) and",
-              "``varflow.registry.INTERPOLATE`` (frame interpolation), filled by the",
+              "``varflow.registry.TRACK`` (trajectories),",
+              "``varflow.registry.INTERPOLATE`` (frame interpolation) and",
+              "``varflow.registry.RESTORE`` (denoising), filled by the",
               "``methods`` module of each package; parameters are composed frozen",
               "dataclasses whose flat names are routed to their owner:", ""]
     lines += summary(["varflow.registry", "varflow.parameters", "varflow.twoframe.params",
                       "varflow.twoframe.methods", "varflow.multiframe.methods",
-                      "varflow.retime.methods"])
+                      "varflow.retime.methods", "varflow.restore.methods",
+                      "varflow.restore.denoise"])
     lines += title("Parameter classes", "-") + [
         "The frozen dataclasses of the methods' parameters and of the terms composed into",
         "them; their fields, symbols and defaults are tabled in :doc:`parameters`.",
