@@ -20,7 +20,7 @@ Run::
     python benchmarks/bench_denoise.py [--data DIR] [--clips bikes,carphone,...]
         [--sigmas 10,30,50] [--frames 20] [--methods nlbayes,nlbayes-fast]
         [--peers opencv-nlm,flow-average,atadenoise,fftdnoiz,per-frame|all|none]
-        [--crop HxW] [--csv OUT.csv] [--cli-case [--cli-clip carphone]
+        [--crop HxW] [--no-estimated] [--csv OUT.csv] [--cli-case [--cli-clip carphone]
         [--cli-sigma 20] [--cli-method M] | --cli-only]
 """
 
@@ -62,6 +62,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=PROTOCOL_FRAMES)
     ap.add_argument("--methods", default=None, help="restoration methods (default all)")
     ap.add_argument("--peers", default="all", help=f"of {','.join(DENOISE_PEERS)}, all, none")
+    ap.add_argument("--no-estimated", action="store_true",
+                    help="skip the run of the first method with sigma estimated")
     ap.add_argument("--crop", default=None, metavar="HxW", help="top-left crop of the frames")
     ap.add_argument("--csv", default=None, help="also write the rows as CSV")
     ap.add_argument("--cli-case", action="store_true",
@@ -84,6 +86,7 @@ def main() -> None:
 
             rows = run_denoise_benchmark(root, args.clips, sigmas, args.frames,
                                          args.methods, args.peers, crop=crop,
+                                         estimated=not args.no_estimated,
                                          callback=progress)
         print(f"Denoising protocol, first {args.frames} frames"
               + (f", top-left {crop[0]}x{crop[1]}" if crop else "") + f"; data {root}")

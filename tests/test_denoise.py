@@ -273,3 +273,17 @@ def test_protocol_clip_beats_per_frame(data_root) -> None:
     alone = varflow.denoise(noisy, 30.0, radius=0)
     assert clip_psnr(motion, clean) > clip_psnr(alone, clean) + 1.5
     assert clip_psnr(motion, clean) > clip_psnr(noisy, clean) + 10
+
+
+@pytest.mark.parametrize(("radius", "chunk", "passes"), [(2, 1, 2), (2, 3, 2), (1, 2, 1)])
+def test_stream_equals_whole_clip_long(radius: int, chunk: int, passes: int) -> None:
+    """A clip much longer than the window: each frame gathers the groups of the
+    frames around it, and the stream takes them in the same order."""
+    rng = np.random.default_rng(1)
+    base = rng.normal(128, 30, (40, 60, 3)).astype(np.float32)
+    clean = np.stack([np.roll(base, k, axis=1) for k in range(14)])
+    noisy = (clean + rng.normal(0, 15, clean.shape)).astype(np.float32)
+    whole = varflow.denoise(noisy, 15.0, radius=radius, passes=passes)
+    streamed = np.stack(list(iter_denoise(iter(noisy), 15.0, radius=radius, chunk=chunk,
+                                          passes=passes)))
+    np.testing.assert_array_equal(streamed, whole)

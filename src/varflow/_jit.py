@@ -50,11 +50,11 @@ FASTMATH_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_kernel")
 
 def _entry(method: str) -> Any:
-    """The registry entry named ``method`` (two-frame, trajectory or interpolation), or
-    None."""
-    from .registry import FLOW, INTERPOLATE, TRACK
+    """The registry entry named ``method`` (two-frame, trajectory, interpolation or
+    restoration), or None."""
+    from .registry import FLOW, INTERPOLATE, RESTORE, TRACK
 
-    for registry in (FLOW, TRACK, INTERPOLATE):
+    for registry in (FLOW, TRACK, INTERPOLATE, RESTORE):
         if method in registry:
             return registry[method]
     return None

@@ -18,19 +18,28 @@ estimated by an empirical Wiener filter (:func:`estimate_group`):
   covariance of the first estimate's group and ``μ`` the mean of the noisy group;
 
 and a group whose variance is within ``flat · σ²`` of the noise is replaced by its
-mean (NL-Bayes' homogeneous-area rule).  Every estimated patch of the group that
-lies in frame ``t`` is added to frame ``t``'s sums (the "paste trick": a position
-already covered is not a reference again), and the frame is the sum over the count.
+mean (NL-Bayes' homogeneous-area rule).  Every estimated patch of the group is
+added to the sums of its own frame, as VNLB aggregates, so a pixel of frame ``t``
+gathers the estimates of the groups formed in frames ``t ± radius``; a position of
+frame ``t`` covered by a patch of one of frame ``t``'s groups is not a reference
+again (the "paste trick"), and each frame is its sum over its count.  The
+reference frames are taken one after the other in increasing order.
 
-Work is split in bands of reference rows; two bands of one phase (even, then odd)
-write disjoint rows, so each phase runs in parallel without races and the result
-does not depend on the number of threads.
+Work is split in bands of reference rows.  A band writes only the rows from
+``search`` above to ``search + patch − 1`` below its own, in every frame (a patch
+of a neighbour frame farther out is used in the estimate but not added), so two
+bands of one phase (even, then odd) write disjoint rows: each phase runs in
+parallel without races and the sums do not depend on the number of threads.  A
+frame's sums do not depend on which frames before it were references, so a stream
+that takes the same references in the same order gets the same bytes.
 
 :func:`estimate_group` (the Wiener step) has the NumPy reference
 :func:`estimate_group_reference`; the tests compare them.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 from numba import njit, prange
@@ -365,6 +374,8 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
     vec = np.zeros((2, d), np.float64)
     ymax = h - patch
     xmax = w - patch
+    zone_lo = y_lo - search  # the top rows of the patches this band may add
+    zone_hi = y_hi - 1 + search
     for y in range(y_lo, min(y_hi, ymax + 1)):
         if not (y % stride == 0 or y == ymax):
             continue
@@ -442,7 +453,7 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
             keep = keep_ws[:m]
             for i in range(m):
                 f = hf[i]
-                keep[i] = f == t
+                keep[i] = f == t or (hy[i] >= zone_lo and hy[i] <= zone_hi)
                 for py in range(patch):
                     for px in range(patch):
                         for c in range(nc):
@@ -457,10 +468,11 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
                     continue
                 for py in range(patch):
                     for px in range(patch):
-                        weight[t, hy[i] + py, hx[i] + px] += 1.0
+                        weight[hf[i], hy[i] + py, hx[i] + px] += 1.0
                         for c in range(nc):
-                            acc[t, hy[i] + py, hx[i] + px, c] += est[c, py * patch + px, i]
-                done[t, hy[i], hx[i]] = True
+                            acc[hf[i], hy[i] + py, hx[i] + px, c] += est[c, py * patch + px, i]
+                if hf[i] == t:
+                    done[t, hy[i], hx[i]] = True
     return
 
 
@@ -478,13 +490,13 @@ def _phase(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, tasks, band, patch,
               beta, flat, acc, weight, done)
 
 
-def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.ndarray,
-                 bwd: np.ndarray, fwd_ok: np.ndarray, bwd_ok: np.ndarray, *, sigma: float,
-                 patch: int, stride: int, search: int, search_t: int, radius: int,
-                 n_similar: int, beta: float, flat: float, dist_channels: int = 0,
-                 tau: float = 0.0, n_min: int = 2,
-                 frames: np.ndarray | None = None) -> np.ndarray:
-    """One NL-Bayes pass over a clip (see the module).
+def accumulate_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.ndarray,
+                    bwd: np.ndarray, fwd_ok: np.ndarray, bwd_ok: np.ndarray,
+                    acc: np.ndarray, weight: np.ndarray, done: np.ndarray, *,
+                    refs: Sequence[int], sigma: float, patch: int, stride: int, search: int,
+                    search_t: int, radius: int, n_similar: int, beta: float, flat: float,
+                    dist_channels: int = 0, tau: float = 0.0, n_min: int = 2) -> None:
+    """Add the groups of reference frames ``refs`` (in that order) to the sums.
 
     Parameters
     ----------
@@ -498,6 +510,14 @@ def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.nda
         ``radius = 0`` for a single frame).
     fwd_ok, bwd_ok : ndarray, shape (F - 1, H, W), bool
         Where each flow passed the forward-backward check.
+    acc : ndarray, shape (F, H, W, C), float32
+        Sums of the estimates (added to).
+    weight : ndarray, shape (F, H, W), float32
+        Their counts (added to).
+    done : ndarray, shape (F, H, W), bool
+        Positions of each reference frame already covered (set).
+    refs : sequence of int
+        The reference frames, in the order they are taken.
     sigma : float
         Noise standard deviation (units of the values).
     patch, stride, search, search_t, radius, n_similar, beta, flat
@@ -510,20 +530,10 @@ def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.nda
         value of the reference join its group (at least ``n_min``); 0: all.
     n_min : int
         The smallest group under ``tau``.
-    frames : ndarray of int, optional
-        The frames to estimate (default all); the others are left as zeros.
-
-    Returns
-    -------
-    ndarray, shape (F, H, W, C), float32
     """
     nf, h, w, nc = noisy.shape
     band = band_height(search, patch)
     nbands = -(-h // band)
-    todo = np.arange(nf) if frames is None else np.asarray(frames, np.int64)
-    acc = np.zeros((nf, h, w, nc), np.float32)
-    weight = np.zeros((nf, h, w), np.float32)
-    done = np.zeros((nf, h, w), np.bool_)
     if fwd.shape[0] == 0:
         fwd = np.zeros((1, h, w, 2), np.float32)
         bwd = fwd
@@ -534,13 +544,56 @@ def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.nda
             bool(oracle), np.ascontiguousarray(fwd, np.float32),
             np.ascontiguousarray(bwd, np.float32), np.ascontiguousarray(fwd_ok),
             np.ascontiguousarray(bwd_ok))
-    for parity in (0, 1):
-        tasks = np.array([(t, b) for t in todo for b in range(parity, nbands, 2)],
-                         np.int64).reshape(-1, 2)
-        if len(tasks):
-            _phase(*args, tasks, band, patch, stride, search, search_t, radius, n_similar,
-                   dist_channels if 0 < dist_channels <= nc else nc, float(tau), int(n_min),
-                   float(sigma) ** 2, float(beta), float(flat), acc, weight, done)
+    for t in refs:
+        for parity in (0, 1):
+            tasks = np.array([(int(t), b) for b in range(parity, nbands, 2)],
+                             np.int64).reshape(-1, 2)
+            if len(tasks):
+                _phase(*args, tasks, band, patch, stride, search, search_t, radius, n_similar,
+                       dist_channels if 0 < dist_channels <= nc else nc, float(tau),
+                       int(n_min), float(sigma) ** 2, float(beta), float(flat), acc, weight,
+                       done)
+
+
+def denoise_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.ndarray,
+                 bwd: np.ndarray, fwd_ok: np.ndarray, bwd_ok: np.ndarray, *, sigma: float,
+                 patch: int, stride: int, search: int, search_t: int, radius: int,
+                 n_similar: int, beta: float, flat: float, dist_channels: int = 0,
+                 tau: float = 0.0, n_min: int = 2,
+                 frames: Sequence[int] | None = None) -> np.ndarray:
+    """One NL-Bayes pass over a clip (see the module and :func:`accumulate_pass`).
+
+    Parameters
+    ----------
+    noisy, guide, oracle, fwd, bwd, fwd_ok, bwd_ok
+        As :func:`accumulate_pass`.
+    sigma, patch, stride, search, search_t, radius, n_similar, beta, flat
+        As :func:`accumulate_pass`.
+    dist_channels, tau, n_min
+        As :func:`accumulate_pass`.
+    frames : sequence of int, optional
+        The reference frames, in increasing order (default all).  A frame's
+        estimate is complete when every frame within ``radius`` of it is one.
+
+    Returns
+    -------
+    ndarray, shape (F, H, W, C), float32
+        The estimate; zeros where no group reached.
+    """
+    nf, h, w, nc = noisy.shape
+    refs = range(nf) if frames is None else [int(k) for k in frames]
+    acc = np.zeros((nf, h, w, nc), np.float32)
+    weight = np.zeros((nf, h, w), np.float32)
+    done = np.zeros((nf, h, w), np.bool_)
+    accumulate_pass(noisy, guide, oracle, fwd, bwd, fwd_ok, bwd_ok, acc, weight, done,
+                    refs=refs, sigma=sigma, patch=patch, stride=stride, search=search,
+                    search_t=search_t, radius=radius, n_similar=n_similar, beta=beta,
+                    flat=flat, dist_channels=dist_channels, tau=tau, n_min=n_min)
+    return normalise(acc, weight)
+
+
+def normalise(acc: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``acc / weight`` where ``weight > 0``, else 0: shapes (..., C) and (...)."""
     out = np.zeros_like(acc)
     np.divide(acc, weight[..., None], out=out, where=weight[..., None] > 0)
     return out

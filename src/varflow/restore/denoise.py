@@ -23,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..registry import RESTORE
-from ._nlbayes import denoise_pass
+from ._nlbayes import accumulate_pass, denoise_pass, normalise
 
 __all__ = ["OPPONENT", "clip_flows", "denoise", "run_nlbayes"]
 
@@ -317,20 +317,27 @@ def run_nlbayes(clip: np.ndarray, sigma: float, params: Any,
     elif flows is None:
         flows = clip_flows(clip, params, params.flow_blur, tick)
     t1 = time.perf_counter()
-    first_frames = frames
-    if frames is not None and params.passes == 2:  # the final pass reads radius more
-        first_frames = sorted({min(max(k + d, 0), n - 1) for k in frames
-                               for d in range(-params.radius, params.radius + 1)})
+    refs_final = refs_first = None
+    if frames is not None:  # a frame gathers the groups of the frames within radius
+        r = kw["radius"]
+
+        def around(ks: Sequence[int], d: int) -> list[int]:
+            return sorted({min(max(k + j, 0), n - 1) for k in ks for j in range(-d, d + 1)})
+
+        refs_final = around(frames, r)
+        refs_first = around(frames, 3 * r if params.passes == 2 else r)
     noisy = _opponent(clip)
     out = denoise_pass(noisy, noisy, False, *flows, patch=params.patch,
-                       n_similar=params.n_similar, frames=first_frames, dist_channels=1,
+                       n_similar=params.n_similar, frames=refs_first, dist_channels=1,
                        tau=params.tau, n_min=_NMIN, **kw)
     tick()
     if params.passes == 2:
         out = denoise_pass(noisy, out, True, *flows, patch=params.patch_final,
-                           n_similar=params.n_similar_final, frames=frames, tau=params.tau_final,
-                           n_min=_NMIN, **kw)
+                           n_similar=params.n_similar_final, frames=refs_final,
+                           tau=params.tau_final, n_min=_NMIN, **kw)
         tick()
+    if frames is not None:
+        out[np.setdiff1d(np.arange(n), np.asarray(frames, np.int64))] = 0
     if stats is not None:
         stats["flow_seconds"] = t1 - t0
         stats["pass_seconds"] = time.perf_counter() - t1
@@ -340,10 +347,47 @@ def run_nlbayes(clip: np.ndarray, sigma: float, params: Any,
 # --------------------------------------------------------------------------- streams
 
 
+class _Sums:
+    """The running sums of one pass in a stream: per frame the estimates' sum, their
+    count and the covered reference positions, and the next reference frame."""
+
+    def __init__(self) -> None:
+        self.acc: dict[int, np.ndarray] = {}
+        self.weight: dict[int, np.ndarray] = {}
+        self.done: dict[int, np.ndarray] = {}
+        self.next = 0
+
+    def window(self, a: int, b: int, h: int, w: int, nc: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        for k in range(a, b + 1):
+            if k not in self.acc:
+                self.acc[k] = np.zeros((h, w, nc), np.float32)
+                self.weight[k] = np.zeros((h, w), np.float32)
+                self.done[k] = np.zeros((h, w), np.bool_)
+        return tuple(np.stack([store[k] for k in range(a, b + 1)])  # type: ignore[return-value]
+                     for store in (self.acc, self.weight, self.done))
+
+    def store(self, a: int, acc: np.ndarray, weight: np.ndarray, done: np.ndarray) -> None:
+        for i in range(len(acc)):
+            self.acc[a + i], self.weight[a + i], self.done[a + i] = acc[i], weight[i], done[i]
+
+    def take(self, k: int) -> np.ndarray:
+        """Frame k's estimate (its sums are complete), forgetting its sums."""
+        est = normalise(self.acc.pop(k), self.weight.pop(k))
+        del self.done[k]
+        return est
+
+
 class _Segment:
-    """The frames of one scene in a stream, with what is computed of them (global
-    indices within the scene): noisy frames (opponent space), flows of consecutive
-    pairs, first estimates, and how far the final estimates went."""
+    """The frames of one scene in a stream, with what is computed of them (indices
+    within the scene): noisy frames (opponent space), flows of consecutive pairs,
+    the running sums of both passes and the complete first estimates.
+
+    The reference frames of each pass are taken in increasing order, as
+    :func:`run_nlbayes` takes them, so each frame's sums and estimate are the same
+    bytes.  First-pass reference ``t`` needs the frames to ``t + r``; a first
+    estimate is complete once the references to ``r`` after it are taken; final
+    reference ``t`` needs the first estimates to ``t + r``."""
 
     def __init__(self, params: Any, sigma: float) -> None:
         self.p = params
@@ -353,9 +397,11 @@ class _Segment:
         self.prepared: dict[int, np.ndarray] = {}  # for the flows
         self.flows: dict[int, tuple[np.ndarray, ...]] = {}  # pair (k, k + 1)
         self.basic: dict[int, np.ndarray] = {}
+        self.first = _Sums()
+        self.final = _Sums()
         self.count = 0
-        self.basic_next = 0
-        self.final_next = 0
+        self.basic_next = 0   # the first estimates before it are complete
+        self.out_next = 0     # the frames before it were given out
         self.range: tuple[float, float] | None = None
 
     def add(self, frame: np.ndarray) -> None:
@@ -379,64 +425,64 @@ class _Segment:
                                  consistency(bw, fw, alpha2=self.p.fb_tolerance))
             del self.prepared[k - 1]
 
-    def _span(self, k0: int, k1: int, source: dict[int, np.ndarray]
-              ) -> tuple[int, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
-        """Frames [k0 - r, k1 + r] within the scene: first index, noisy, source, flows."""
-        a, b = max(k0 - self.r, 0), min(k1 + self.r, self.count - 1)
+    def _pass(self, sums: _Sums, t1: int, oracle: bool) -> None:
+        """Take the references ``sums.next .. t1`` of a pass."""
+        t0 = sums.next
+        a, b = max(t0 - self.r, 0), min(t1 + self.r, self.count - 1)
         noisy = np.stack([self.noisy[k] for k in range(a, b + 1)])
-        guide = np.stack([source[k] for k in range(a, b + 1)])
+        guide = np.stack([self.basic[k] for k in range(a, b + 1)]) if oracle else noisy
+        h, w, nc = noisy.shape[1:]
         if b > a and self.r > 0:
             parts = [self.flows[k] for k in range(a, b)]
             flows = tuple(np.stack([q[i] for q in parts]) for i in range(4))
         else:
-            h, w = noisy.shape[1:3]
             flows = (np.zeros((0, h, w, 2), np.float32), np.zeros((0, h, w, 2), np.float32),
                      np.zeros((0, h, w), np.bool_), np.zeros((0, h, w), np.bool_))
-        return a, noisy, guide, flows
-
-    def _pass(self, k0: int, k1: int, oracle: bool) -> np.ndarray:
-        a, noisy, guide, flows = self._span(k0, k1, self.basic if oracle else self.noisy)
+        acc, weight, done = sums.window(a, b, h, w, nc)
         p = self.p
-        out = denoise_pass(
-            noisy, guide, oracle, *flows, sigma=self.sigma,
-            patch=p.patch_final if oracle else p.patch,
+        accumulate_pass(
+            noisy, guide, oracle, *flows, acc, weight, done, refs=range(t0 - a, t1 - a + 1),
+            sigma=self.sigma, patch=p.patch_final if oracle else p.patch,
             n_similar=p.n_similar_final if oracle else p.n_similar,
-            radius=self.r if len(noisy) > 1 else 0, search=p.search, search_t=p.search_t,
+            radius=self.r if b > a else 0, search=p.search, search_t=p.search_t,
             stride=p.stride, beta=p.beta, flat=p.flat, dist_channels=0 if oracle else 1,
-            tau=p.tau_final if oracle else p.tau, n_min=_NMIN,
-            frames=np.arange(k0 - a, k1 - a + 1))
-        return out[k0 - a:k1 - a + 1]
+            tau=p.tau_final if oracle else p.tau, n_min=_NMIN)
+        sums.store(a, acc, weight, done)
+        sums.next = t1 + 1
 
     def advance(self, chunk: int, end: bool) -> list[np.ndarray]:
         """Compute what the frames so far allow (all of it at the scene's end), in
-        batches of at least ``chunk`` frames; return the finished frames (RGB)."""
-        r, two = self.r, self.p.passes == 2
-        ready_basic = self.count - 1 if end else self.count - 1 - r
-        if ready_basic >= self.basic_next and (
-                end or ready_basic - self.basic_next + 1 >= chunk):
-            est = self._pass(self.basic_next, ready_basic, False)
-            for i, k in enumerate(range(self.basic_next, ready_basic + 1)):
-                self.basic[k] = est[i]
-            self.basic_next = ready_basic + 1
-        done: list[np.ndarray] = []
+        batches of at least ``chunk`` reference frames; return the finished frames
+        (RGB)."""
+        r, two, last = self.r, self.p.passes == 2, self.count - 1
+        ready = last if end else last - r
+        if ready >= self.first.next and (end or ready - self.first.next + 1 >= chunk):
+            self._pass(self.first, ready, False)
+        complete = last if end and self.first.next > last else self.first.next - 1 - r
+        while self.basic_next <= complete:
+            self.basic[self.basic_next] = self.first.take(self.basic_next)
+            self.basic_next += 1
+        out: list[np.ndarray] = []
         if not two:
-            while self.final_next < self.basic_next:
-                done.append(self.basic.pop(self.final_next))
-                self.final_next += 1
+            while self.out_next < self.basic_next:
+                out.append(self.basic.pop(self.out_next))
+                self.out_next += 1
+            keep_from = self.first.next - r
         else:
-            ready_final = self.basic_next - 1 if end else self.basic_next - 1 - r
-            if ready_final >= self.final_next and (
-                    end or ready_final - self.final_next + 1 >= chunk):
-                est = self._pass(self.final_next, ready_final, True)
-                done = list(est)
-                self.final_next = ready_final + 1
-        # forget what no later frame reads
-        keep_from = min(self.final_next - r if two else self.final_next,
-                        self.basic_next - r)
+            at_end = end and self.basic_next > last
+            ready = last if at_end else self.basic_next - 1 - r
+            if ready >= self.final.next and (at_end or ready - self.final.next + 1 >= chunk):
+                self._pass(self.final, ready, True)
+            complete = last if at_end and self.final.next > last else self.final.next - 1 - r
+            while self.out_next <= complete:
+                out.append(self.final.take(self.out_next))
+                self.out_next += 1
+            keep_from = min(self.first.next, self.final.next) - r
+        # forget what no later reference reads
         for store in (self.noisy, self.basic, self.flows):
-            for k in [k for k in store if k < keep_from - (store is self.flows)]:
+            for k in [k for k in store if k < keep_from]:
                 del store[k]
-        return [_opponent(f[None], inverse=True)[0] for f in done]
+        return [_opponent(f[None], inverse=True)[0] for f in out]
 
 
 def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = None, *,
@@ -446,8 +492,8 @@ def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = N
     """Denoise a stream of frames with bounded memory; yield the frames in order.
 
     The same estimate as :func:`denoise` on each scene, computed as the frames
-    arrive: a frame is given out once the ``2 · radius`` frames after it (one pass:
-    ``radius``) are read, and memory holds about ``chunk + 4 · radius`` frames.
+    arrive: a frame is given out once the ``4 · radius`` frames after it (one pass:
+    ``2 · radius``) are read, and memory holds about ``chunk + 6 · radius`` frames.
 
     Parameters
     ----------
