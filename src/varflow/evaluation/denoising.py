@@ -105,8 +105,8 @@ def protocol_clips(root: str | Path, frames: int = 20,
     root : str or path
         The benchmark data folder (:func:`varflow.evaluation.datasets.data_root`).
     frames : int
-        Frames per clip from its start (frames 1.. of Sintel alley_1 final; the
-        10 of sintel-demo at most).
+        Frames per clip from its start (``frame_0001.png`` on for Sintel alley_1
+        final; the 10 of sintel-demo at most).
     names : tuple of str, optional
         Which clips (default all, tuning then reporting).
 
@@ -129,7 +129,7 @@ def protocol_clips(root: str | Path, frames: int = 20,
     out = {}
     for name in names or (*TUNING_CLIPS, *REPORTING_CLIPS):
         files = sorted(where[name].glob("*.png"))
-        files = files[1:frames + 1] if name == "alley_1" else files[:frames]
+        files = files[:frames]
         if not files:
             raise FileNotFoundError(2, "no frames of the clip", str(where[name]))
         out[name] = np.stack([read_image(f) for f in files]).astype(np.float32)
