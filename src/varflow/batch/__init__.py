@@ -23,16 +23,14 @@ runner
     The driver: resume rules, submission with bounded in-flight tasks.
 zarrsink
     The optional Zarr mirror (``--zarr``).
-denoise
-    Denoising one video or frame folder into a video or a frame folder
-    (:func:`~varflow.batch.denoise.denoise_video`): the task of ``varflow batch
-    denoise`` and the work of ``varflow denoise``.
+
+The task of ``varflow batch denoise`` is :func:`varflow.restore.video.denoise_video`,
+the work of ``varflow denoise``.
 
 The ``varflow batch`` sub-command is :mod:`varflow.cli.batch`.  This package needs
-the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``), except
-:mod:`~varflow.batch.denoise`; the rest of varflow never imports them.  The names
-below are imported on first use, so that importing :mod:`varflow.batch.denoise`
-loads none of them.
+the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``); the
+rest of varflow never imports them.  The names below are imported on first use, so
+that importing a module of this package loads only what it needs.
 """
 
 from __future__ import annotations

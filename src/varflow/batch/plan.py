@@ -26,7 +26,7 @@ Retiming (``varflow batch retime``)
 
 Denoising (``varflow batch denoise``)
     One task per input: the whole video (or frame folder) denoised with
-    :func:`varflow.batch.denoise.denoise_video` (σ given on the 0-255 scale, or
+    :func:`varflow.restore.video.denoise_video` (σ given on the 0-255 scale, or
     estimated per input) to ``OUT/<name>.<format>`` (``mkv`` by default: lossless
     FFV1; lossless in the other containers where they allow it), audio copied.
 """

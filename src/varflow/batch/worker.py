@@ -4,7 +4,7 @@ A task reads only the frames it needs (a video is opened with
 ``read_frames(path, start=..., stop=..., step=...)``, a frame folder by the task's
 own frame files; a retime task streams its whole input through
 :func:`varflow.retime.stream.retime_video`, a denoise task through
-:func:`varflow.batch.denoise.denoise_video`), writes its output with the atomic
+:func:`varflow.restore.video.denoise_video`), writes its output with the atomic
 writers of :mod:`varflow.io` and returns a small result dictionary; it never touches the manifest.
 
 Threads: every task runs single-threaded (Numba, OpenCV); a worker runs as many
@@ -182,7 +182,7 @@ def _compute(item: WorkItem) -> None:
         retime_video(item.source, out, method=item.method, params=item.params, **item.retime)
         return
     if item.kind == "denoise":
-        from .denoise import denoise_video
+        from ..restore.video import denoise_video
 
         assert item.denoise is not None and isinstance(item.source, str)
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,7 @@ IN is a video file or a folder of frames (its image files in natural order, as
 are streamed through the motion-compensated denoiser
 (:func:`varflow.restore.denoise.iter_denoise`: a frame is written once the frames
 after it that it needs are read, memory holds about ``chunk + 4 · radius`` frames)
-by :func:`varflow.batch.denoise.denoise_video`.
+by :func:`varflow.restore.video.denoise_video`.
 
 OUT is a video or a folder (a path without extension) of ``000000.png ...`` of the
 input's bit depth (8 or 16 bits).  A video keeps the input's frame rate (a folder's:
@@ -143,7 +143,7 @@ def resolve(args: argparse.Namespace) -> tuple[Any, Any]:
 
 
 def _cmd_denoise(args: argparse.Namespace) -> int:
-    from ..batch.denoise import denoise_video
+    from ..restore.video import denoise_video
 
     entry, params = resolve(args)
     _claim_inputs((args.source, "IN"))
@@ -166,7 +166,7 @@ def _plural(n: int, word: str) -> str:
 
 def summary_line(s: Any) -> str:
     """The line ``varflow denoise`` prints for a
-    :class:`~varflow.batch.denoise.DenoiseSummary`."""
+    :class:`~varflow.restore.video.DenoiseSummary`."""
     colour = {1: "grey", 3: "RGB"}.get(s.channels, f"{s.channels}-channel")
     last = s.start + s.n_frames - 1
     section = "" if s.n_frames == s.n_input else f" (frames {s.start}..{last} of {s.n_input})"

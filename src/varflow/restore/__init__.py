@@ -1,8 +1,14 @@
-"""Restoration of footage with motion: noise estimation (and, to come, denoising and
-archival defects).
+"""Restoration of footage with motion.
 
 * :mod:`varflow.restore.noise` -- the noise level of a clip, per channel and as a
   curve over intensity, from its least textured blocks.
+* :mod:`varflow.restore.denoise` -- :func:`varflow.denoise` and the streaming
+  :func:`~varflow.restore.denoise.iter_denoise`; the kernels of motion-compensated
+  NL-Bayes are in :mod:`varflow.restore._nlbayes`.
+* :mod:`varflow.restore.methods` -- the restoration methods and their parameters
+  (:data:`varflow.registry.RESTORE`).
+* :mod:`varflow.restore.video` -- a video or a frame folder denoised into a video
+  or a frame folder (``varflow denoise`` and ``varflow batch denoise``).
 """
 
 from .noise import NoiseEstimate, estimate_noise

@@ -411,9 +411,9 @@ def denoise_video(
     """
     from ..io.sequences import FrameSource
     from ..registry import RESTORE
-    from ..restore.denoise import iter_denoise
     from ..retime.schedule import parse_rate
     from ..retime.stream import is_scene_cut
+    from .denoise import iter_denoise
 
     t0 = time.perf_counter()
     entry = RESTORE.entry(method if method is not None else RESTORE.default)
