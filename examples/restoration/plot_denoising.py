@@ -70,7 +70,7 @@ for ax, (name, img) in zip(axes[0], panels, strict=True):
     ax.set_title(name)
 h, w = clean.shape[1:3]
 crop = (slice(h // 4, h // 4 + h // 2), slice(w // 4, w // 4 + w // 2))
-for ax, name in zip(axes[1], ("varflow.denoise", "frame by frame", "OpenCV NL-means"),
+for ax, name in zip(axes[1, :3], ("varflow.denoise", "frame by frame", "OpenCV NL-means"),
                     strict=True):
     ax.imshow(show(results[name][k][crop]))
     ax.set_title(f"{name}: {clip_psnr(results[name], clean):.2f} dB")
