@@ -24,6 +24,9 @@ estimate_noise(frames)
     The noise level of a clip, per channel and over intensity.
 denoise(frames, sigma=None, method="nlbayes", **params) / restoration_methods()
     The clip without its noise (motion-compensated NL-Bayes), in the input's dtype.
+deflicker(frames) / remove_dirt(frames, return_mask=False) / stabilise(frames)
+    Archival defects: frame-to-frame exposure flicker, dirt and dust on one frame,
+    gate weave; each keeps the input's shape and dtype.
 
 Conventions: images are uint8, uint16 or float, ``(H, W)`` or ``(H, W, C)``;
 flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal component u and
@@ -103,6 +106,9 @@ __all__ = [
     "consistency",
     "estimate_noise",
     "denoise",
+    "deflicker",
+    "remove_dirt",
+    "stabilise",
     "restoration_methods",
     "RESTORE",
 ]
@@ -112,6 +118,9 @@ __all__ = [
 _LAZY = {
     "estimate_noise": ("restore.noise", "estimate_noise"),
     "denoise": ("restore.denoise", "denoise"),
+    "deflicker": ("restore.flicker", "deflicker"),
+    "remove_dirt": ("restore.dirt", "remove_dirt"),
+    "stabilise": ("restore.stabilise", "stabilise"),
     "warp": ("compensate", "warp"),
     "consistency": ("compensate", "consistency"),
     "read_flo": ("io.flo", "read_flo"),

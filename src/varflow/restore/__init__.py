@@ -7,6 +7,13 @@
   NL-Bayes are in :mod:`varflow.restore._nlbayes`.
 * :mod:`varflow.restore.methods` -- the restoration methods and their parameters
   (:data:`varflow.registry.RESTORE`).
+* :mod:`varflow.restore.flicker` -- :func:`varflow.deflicker`: a smooth gain and
+  offset per frame against the motion-compensated neighbours, corrected toward a
+  temporally smoothed path (fades and lights that stay are kept).
+* :mod:`varflow.restore.dirt` -- :func:`varflow.remove_dirt`: blotches as temporal
+  outliers along the motion, filled from the neighbours, with the mask of what changed.
+* :mod:`varflow.restore.stabilise` -- :func:`varflow.stabilise`: gate weave removed
+  from a robust global fit to the flows and a smoothed camera path.
 * :mod:`varflow.restore.video` -- a video or a frame folder denoised into a video
   or a frame folder (``varflow denoise`` and ``varflow batch denoise``).
 """
