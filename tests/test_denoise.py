@@ -257,7 +257,7 @@ def test_registry_and_presets() -> None:
     assert varflow.restoration_methods() == ["nlbayes", "nlbayes-fast"]
     assert varflow.RESTORE.default == "nlbayes"
     fast = varflow.RESTORE["nlbayes-fast"].defaults()
-    assert fast.passes == 1 and fast.radius < NLBayesParams().radius
+    assert fast.radius < NLBayesParams().radius and fast.stride > NLBayesParams().stride
     p = varflow.RESTORE.make_params("nlbayes", radius=2, data_weight=40.0)
     assert p.radius == 2 and p.flow_params.data_weight == 40.0
 

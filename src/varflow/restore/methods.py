@@ -63,7 +63,8 @@ class NLBayesParams(FlowComposed):
         their Gram matrix.  Default 4.
     tau_final : float
         The same in the final pass, on the first estimate (whose copies of one
-        patch are much closer than ``2 σ²``).  Default 1.
+        patch are much closer than ``2 σ²``); it binds at low noise only, where
+        a tight threshold leaves groups too small.  Default 4.
     stride : int
         Step between reference patches, pixels (at most the patch side, so
         every pixel is covered); positions already covered by an estimated
@@ -103,7 +104,7 @@ class NLBayesParams(FlowComposed):
     search: int = 7
     search_t: int = 4
     tau: float = 4.0
-    tau_final: float = 1.0
+    tau_final: float = 4.0
     stride: int = 3
     beta: float = 1.0
     flat: float = 1.05
@@ -156,10 +157,13 @@ class NLBayesParams(FlowComposed):
 
 
 def fast_defaults() -> NLBayesParams:
-    """The ``nlbayes-fast`` preset: one pass, radius 2, a sparser reference grid and
-    flows on frames reduced to at most 150 000 pixels (groups keep nlbayes' size:
-    fewer patches than a colour patch has values weaken the estimate)."""
-    return NLBayesParams(radius=2, passes=1, stride=4, search=5, flow_max_pixels=150_000)
+    """The ``nlbayes-fast`` preset: both passes on radius 3, 5 × 5 patches in both, a
+    sparser grid of reference patches (stride 4), smaller search windows, 60 patches
+    per first-pass group, and flows on frames reduced to at most 150 000 pixels.  The
+    final pass keeps 90 patches per group: its estimate is what the output is made
+    of, and fewer patches there cost more than anywhere else."""
+    return NLBayesParams(radius=3, patch_final=5, n_similar=60, n_similar_final=90,
+                         search=5, search_t=3, stride=4, flow_max_pixels=150_000)
 
 
 def _run(*args: Any, **kwargs: Any) -> Any:
@@ -189,7 +193,8 @@ RESTORE.register(Restorer(
 ))
 RESTORE.register(Restorer(
     name="nlbayes-fast",
-    description="nlbayes with one pass, radius 2 and reduced flows",
+    description="nlbayes with radius 3, smaller patches and searches, a sparser grid "
+    "and reduced flows",
     defaults=fast_defaults,
     memory=MemoryFactors(base=0, per_frame=100),
     kernels=_KERNELS,
