@@ -121,10 +121,9 @@ CASE_METHODS: dict[str, tuple[tuple[str, str], ...]] = {
     "all": (("varflow-chain", "varflow"), ("ffmpeg-chain", "ffmpeg")),
 }
 
-#: tmedian's radius (frames each side) in :func:`ffmpeg_chain`.  From
-#: ``tune_ffmpeg_chain()`` on the tuning split (bikes, carphone; 12 frames, top-left
-#: 272x320, carphone whole): the best mean centre PSNR of the ``all`` case over
-#: :data:`CHAIN_GRID` (25.07 dB; radius 1: 23.70 at best).
+#: tmedian's radius (frames each side) in :func:`ffmpeg_chain`: the best mean centre
+#: PSNR of the ``all`` case over :data:`CHAIN_GRID` on the clips of
+#: :data:`~varflow.evaluation.denoising.TUNING_CLIPS` (:func:`tune_ffmpeg_chain`).
 CHAIN_TMEDIAN_RADIUS = 2
 #: atadenoise's thresholds ``(A, B)`` (fractions of the range, every plane) in
 #: :func:`ffmpeg_chain`; from :func:`tune_ffmpeg_chain` as :data:`CHAIN_TMEDIAN_RADIUS`.
