@@ -344,7 +344,6 @@ def ffmpeg_filter_clip(frames: np.ndarray, name: str, options: str,
         Not an RGB clip, options the filter refuses, or a frame count out of the
         filter other than the count in.
     """
-    import av
 
     a = np.asarray(frames)
     deep = a.dtype == np.uint16
@@ -353,18 +352,35 @@ def ffmpeg_filter_clip(frames: np.ndarray, name: str, options: str,
         raise ValueError(f"frames: expected an RGB clip (F, H, W, 3), got shape {clip.shape}")
     packed = "rgb48le" if deep else "rgb24"
     pix_fmt = pix_fmt or ("gbrp16le" if deep else "gbrp")
-    n, h, w, _ = clip.shape
+    n = clip.shape[0]
+    out = _filter_graph(clip, packed, pix_fmt, [(name, options)],
+                        f"options: FFmpeg's {name} refuses {options!r}")
+    if len(out) != n:
+        raise ValueError(f"{name}: {len(out)} frames out of the filter for {n} in")
+    return np.stack(out)
+
+
+def _filter_graph(clip: np.ndarray, packed: str, pix_fmt: str,
+                  filters: Sequence[tuple[str, str]], refused: str) -> list[np.ndarray]:
+    """The frames out of ``buffer (packed) → format=pix_fmt → filters → format=packed →
+    buffersink`` for ``clip`` pushed in order at 25 frames per second, the graph
+    flushed at the end; ``refused`` starts the ``ValueError`` of a graph FFmpeg
+    refuses."""
+    import av
+
+    _, h, w, _ = clip.shape
     base = Fraction(1, 25)
     graph = av.filter.Graph()
     try:
         chain = [graph.add_buffer(width=w, height=h, format=packed, time_base=base),
-                 graph.add("format", pix_fmt), graph.add(name, options),
-                 graph.add("format", packed), graph.add("buffersink")]
+                 graph.add("format", pix_fmt)]
+        chain += [graph.add(name, options) for name, options in filters]
+        chain += [graph.add("format", packed), graph.add("buffersink")]
         for up, down in zip(chain, chain[1:], strict=False):
             up.link_to(down)
         graph.configure()
     except (av.FFmpegError, ValueError) as exc:
-        raise ValueError(f"options: FFmpeg's {name} refuses {options!r}: {exc}") from None
+        raise ValueError(f"{refused}: {exc}") from None
     out: list[np.ndarray] = []
 
     def drain() -> None:
@@ -383,9 +399,7 @@ def ffmpeg_filter_clip(frames: np.ndarray, name: str, options: str,
         drain()
     graph.push(None)
     drain()
-    if len(out) != n:
-        raise ValueError(f"{name}: {len(out)} frames out of the filter for {n} in")
-    return np.stack(out)
+    return out
 
 
 #: The FFmpeg peers' 8-bit frames enter their filter as 16-bit planar RGB

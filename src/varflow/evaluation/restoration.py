@@ -48,7 +48,6 @@ import math
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +55,7 @@ import numpy as np
 
 from .denoising import (
     TUNING_CLIPS,
+    _filter_graph,
     check_denoise_clips,
     clip_psnr,
     ffmpeg_filter_clip,
@@ -508,44 +508,14 @@ def ffmpeg_graph_clip(frames: np.ndarray, filters: Sequence[tuple[str, str]],
     ValueError
         A filter or options FFmpeg refuses, or a clip that is not RGB.
     """
-    import av
-
     clip = np.asarray(frames)
     if clip.ndim != 4 or clip.shape[-1] != 3:
         raise ValueError(f"frames: expected an RGB clip (F, H, W, 3), got shape {clip.shape}")
     clip = np.ascontiguousarray(np.clip(np.rint(np.asarray(clip, np.float64)), 0, 255)
                                 .astype(np.uint8))
     _, h, w, _ = clip.shape
-    base = Fraction(1, 25)
-    graph = av.filter.Graph()
-    try:
-        chain = [graph.add_buffer(width=w, height=h, format="rgb24", time_base=base),
-                 graph.add("format", pix_fmt)]
-        chain += [graph.add(name, options) for name, options in filters]
-        chain += [graph.add("format", "rgb24"), graph.add("buffersink")]
-        for up, down in zip(chain, chain[1:], strict=False):
-            up.link_to(down)
-        graph.configure()
-    except (av.FFmpegError, ValueError) as exc:
-        raise ValueError(f"filters: FFmpeg refuses {list(filters)!r}: {exc}") from None
-    out: list[np.ndarray] = []
-
-    def drain() -> None:
-        while True:
-            try:
-                frame = graph.pull()
-            except (av.BlockingIOError, av.EOFError):
-                return
-            out.append(frame.to_ndarray(format="rgb24"))
-
-    for i, f in enumerate(clip):
-        vf = av.VideoFrame.from_ndarray(f, format="rgb24")
-        vf.pts = i
-        vf.time_base = base
-        graph.push(vf)
-        drain()
-    graph.push(None)
-    drain()
+    out = _filter_graph(clip, "rgb24", pix_fmt, filters,
+                        f"filters: FFmpeg refuses {list(filters)!r}")
     return np.stack(out) if out else np.empty((0, h, w, 3), np.uint8)
 
 
