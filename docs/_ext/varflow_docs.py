@@ -32,11 +32,11 @@ HELP_COLUMNS = 88
 
 def registries() -> dict[str, dict[str, Any]]:
     """The method registries by kind: two-frame flow, trajectories, interpolation,
-    restoration."""
-    from varflow.registry import FLOW, INTERPOLATE, RESTORE, TRACK
+    restoration (denoisers), repair (the stages of ``varflow restore``)."""
+    from varflow.registry import FLOW, INTERPOLATE, REPAIR, RESTORE, TRACK
 
     return {"twoframe": FLOW, "trajectories": TRACK, "interpolation": INTERPOLATE,
-            "restoration": RESTORE}
+            "restoration": RESTORE, "repair": REPAIR}
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
@@ -79,7 +79,7 @@ def _rst_text(text: str) -> str:
 
 def parameter_rst(kind: str) -> list[str]:
     """reST of the parameter tables of every method of one registry."""
-    from varflow.cli._common import parameter_rows
+    from varflow.cli._common import flag_of, parameter_rows
 
     lines: list[str] = []
     from varflow.registry import parameter_fields
@@ -101,7 +101,7 @@ def parameter_rst(kind: str) -> list[str]:
                   "   * - parameter (flag)", "     - symbol", "     - default",
                   "     - meaning"]
         for field, symbol, default, meaning in parameter_rows(name):
-            flag = "--" + field.replace("_", "-")
+            flag = flag_of(name, field)
             lines += [f"   * - ``{field}`` (``{flag}``)", f"     - {symbol or '—'}",
                       f"     - ``{default}``", f"     - {_rst_text(meaning) or '—'}"]
         lines.append("")
@@ -178,14 +178,15 @@ def api_page() -> str:
     lines += ["One registry per kind of method, which the command line, the benchmarks and",
               "these pages read: ``varflow.registry.FLOW`` (two-frame flow),",
               "``varflow.registry.TRACK`` (trajectories),",
-              "``varflow.registry.INTERPOLATE`` (frame interpolation) and",
-              "``varflow.registry.RESTORE`` (denoising), filled by the",
+              "``varflow.registry.INTERPOLATE`` (frame interpolation),",
+              "``varflow.registry.RESTORE`` (denoising) and ``varflow.registry.REPAIR``",
+              "(the repair stages of archival footage), filled by the",
               "``methods`` module of each package; parameters are composed frozen",
               "dataclasses whose flat names are routed to their owner:", ""]
     lines += summary(["varflow.registry", "varflow.parameters", "varflow.twoframe.params",
                       "varflow.twoframe.methods", "varflow.multiframe.methods",
                       "varflow.retime.methods", "varflow.restore.methods",
-                      "varflow.restore.denoise"])
+                      "varflow.restore.denoise", "varflow.restore.chain"])
     lines += title("Parameter classes", "-") + [
         "The frozen dataclasses of the methods' parameters and of the terms composed into",
         "them; their fields, symbols and defaults are tabled in :doc:`parameters`.",

@@ -27,6 +27,8 @@ denoise(frames, sigma=None, method="nlbayes", **params) / restoration_methods()
 deflicker(frames) / remove_dirt(frames, return_mask=False) / stabilise(frames)
     Archival defects: frame-to-frame exposure flicker, dirt and dust on one frame,
     gate weave; each keeps the input's shape and dtype.
+restore_clip(frames, stages=None, sigma=None, return_mask=False)
+    The repair stages and the denoiser chained in the order of practice.
 
 Conventions: images are uint8, uint16 or float, ``(H, W)`` or ``(H, W, C)``;
 flows are ``(H, W, 2)`` float32 with ``[..., 0]`` the horizontal component u and
@@ -109,6 +111,7 @@ __all__ = [
     "deflicker",
     "remove_dirt",
     "stabilise",
+    "restore_clip",
     "restoration_methods",
     "RESTORE",
 ]
@@ -121,6 +124,7 @@ _LAZY = {
     "deflicker": ("restore.flicker", "deflicker"),
     "remove_dirt": ("restore.dirt", "remove_dirt"),
     "stabilise": ("restore.stabilise", "stabilise"),
+    "restore_clip": ("restore.chain", "restore_clip"),
     "warp": ("compensate", "warp"),
     "consistency": ("compensate", "consistency"),
     "read_flo": ("io.flo", "read_flo"),

@@ -52,9 +52,9 @@ SHARED_KERNELS = ("varflow.ops.warp:_warp_kernel", "varflow.ops.pyramid:_resize_
 def _entry(method: str) -> Any:
     """The registry entry named ``method`` (two-frame, trajectory, interpolation or
     restoration), or None."""
-    from .registry import FLOW, INTERPOLATE, RESTORE, TRACK
+    from .registry import REGISTRIES
 
-    for registry in (FLOW, TRACK, INTERPOLATE, RESTORE):
+    for registry in REGISTRIES:
         if method in registry:
             return registry[method]
     return None

@@ -10,6 +10,7 @@ registry                  entries                registered in
 :data:`TRACK`             :class:`Tracker`       :mod:`varflow.multiframe.methods`
 :data:`INTERPOLATE`       :class:`Interpolator`  :mod:`varflow.retime.methods`
 :data:`RESTORE`           :class:`Restorer`      :mod:`varflow.restore.methods`
+:data:`REPAIR`            :class:`Repairer`      :mod:`varflow.restore.methods`
 ========================  =====================  =========================================
 
 An entry carries everything known about a method under its name: a one-line
@@ -52,8 +53,11 @@ __all__ = [
     "METHODS",
     "MemoryFactors",
     "Method",
+    "REGISTRIES",
+    "REPAIR",
     "RESTORE",
     "Registry",
+    "Repairer",
     "Restorer",
     "TRACK",
     "TRACKERS",
@@ -230,6 +234,33 @@ class Restorer(Entry):
     run: Callable[..., Any] | None = None
 
 
+@dataclass(frozen=True)
+class Repairer(Entry):
+    """A repair stage for archival defects (:data:`REPAIR`): gate weave, flicker, dirt.
+
+    Attributes
+    ----------
+    run : callable
+        ``run(clip, params, callback=None, stats=None) -> (clip, mask)`` with ``clip``
+        ``(F, H, W, C)`` float32 on the 0-255 scale and ``mask`` the ``(F, H, W)``
+        bool mask of the pixels the stage replaced (None for a stage that changes
+        every pixel); ``callback(done, total)`` reports progress; ``stats`` (a dict)
+        gains timings.
+    order : int
+        Its place in the chain of :func:`varflow.restore.chain.iter_restore`, as
+        restoration practice orders the stages: geometry first (the later stages
+        compare aligned frames), then brightness (the dirt test compares
+        intensities), then dirt; denoising comes after all of them.
+    context : callable
+        ``context(params) -> int``: the frames each side of a frame that its result
+        depends on; a stream is repaired in windows overlapping by this many frames.
+    """
+
+    run: Callable[..., Any] | None = None
+    order: int = 0
+    context: Callable[[Any], int] | None = None
+
+
 class Registry(MutableMapping):
     """The methods of one kind, by name, in registration order.
 
@@ -342,11 +373,16 @@ class Registry(MutableMapping):
         m.check_params(base)
         if not overrides:
             return base
+        valid = sorted(name for name, _, _ in flat_fields(base))
         try:
-            out = base.replace(**overrides) if hasattr(base, "replace") else \
-                dataclasses.replace(base, **overrides)
+            if not hasattr(base, "replace"):
+                unknown = sorted(set(overrides) - set(valid))
+                if unknown:
+                    raise UnknownParameter(unknown[0], type(base).__name__)
+                out = dataclasses.replace(base, **overrides)
+            else:
+                out = base.replace(**overrides)
         except UnknownParameter as exc:
-            valid = sorted(name for name, _, _ in flat_fields(base))
             raise ValueError(f"{exc.name}: not a parameter of {self.kind} {m.name!r} "
                              f"(valid: {', '.join(valid)})") from None
         except TypeError as exc:  # dataclasses.replace of a class without routing
@@ -380,6 +416,12 @@ INTERPOLATE = Registry("interpolation method", Interpolator, "varflow.retime.met
 #: The restoration methods (:func:`varflow.denoise`).
 RESTORE = Registry("restoration method", Restorer, "varflow.restore.methods", "nlbayes")
 
+#: The repair stages of archival footage (:func:`varflow.restore_clip`).
+REPAIR = Registry("repair stage", Repairer, "varflow.restore.methods", "dirt")
+
+#: Every registry, in the order listings show them.
+REGISTRIES = (FLOW, TRACK, INTERPOLATE, RESTORE, REPAIR)
+
 METHODS = FLOW
 TRACKERS = TRACK
 
@@ -408,7 +450,7 @@ def make_track_params(method: str | Tracker, params: Any = None, **overrides: An
 def parameter_fields(entry: Entry, flow_method: str | None = None
                      ) -> list[tuple[str, Any, type]]:
     """The flat parameters of any registered entry (:meth:`Registry.fields`)."""
-    for registry in (FLOW, TRACK, INTERPOLATE, RESTORE):
+    for registry in REGISTRIES:
         if isinstance(entry, registry.entry_type):
             return registry.fields(entry, flow_method)
     raise ValueError(f"method: not a registered entry: {entry!r}")

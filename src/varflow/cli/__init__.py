@@ -4,6 +4,7 @@ Commands, each with its synopsis in the notes of its module (and ``varflow
 COMMAND --help``): ``flow``, ``show``, ``eval``, ``demo`` and ``methods``
 (:mod:`~varflow.cli.flow`); ``track`` (:mod:`~varflow.cli.track`); ``interpolate`` and
 ``retime`` (:mod:`~varflow.cli.interpolate`); ``denoise`` (:mod:`~varflow.cli.denoise`);
+``restore`` (:mod:`~varflow.cli.restore`);
 ``bench middlebury | middlebury-multiframe | trajectories | twoframe |
 sintel-trajectories`` (:mod:`~varflow.cli.bench`); ``video`` (:mod:`~varflow.cli.video`);
 ``batch flow | track | retime | denoise`` (:mod:`~varflow.cli.batch`); ``report``
@@ -28,7 +29,8 @@ can show the defaults of the ``--method``/``--methods`` it names), called by
 :func:`build_parser` in the order of ``varflow --help``:
 :mod:`~varflow.cli.flow` (flow, show, eval, demo, methods), :mod:`~varflow.cli.track`,
 :mod:`~varflow.cli.interpolate` (interpolate, retime), :mod:`~varflow.cli.denoise`,
-:mod:`~varflow.cli.bench`, :mod:`~varflow.cli.video`, :mod:`~varflow.cli.batch` and
+:mod:`~varflow.cli.restore`, :mod:`~varflow.cli.bench`, :mod:`~varflow.cli.video`,
+:mod:`~varflow.cli.batch` and
 :mod:`~varflow.cli.report`.  A new command (e.g. ``interpolate``, ``retime``) gets a
 module of its own, added to :func:`build_parser`.  The library never imports
 this package.
@@ -86,9 +88,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                         help="log to stderr: -v INFO, -vv DEBUG")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
                                 parser_class=_Parser)
-    from . import batch, bench, denoise, flow, interpolate, report, track, video
+    from . import batch, bench, denoise, flow, interpolate, report, restore, track, video
 
-    for module in (flow, track, interpolate, denoise, bench, video, batch, report):
+    for module in (flow, track, interpolate, denoise, restore, bench, video, batch, report):
         module.add_parser(sub, common, argv)
     return parser
 

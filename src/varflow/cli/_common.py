@@ -363,7 +363,7 @@ def _own_params(args: argparse.Namespace, entry: Any, kind: str) -> dict[str, An
 
 def _entry(method: str) -> Any:
     """The registered entry named ``method``, of any kind (two-frame flow first)."""
-    from ..registry import INTERPOLATE, RESTORE
+    from ..registry import INTERPOLATE, REPAIR, RESTORE
 
     if method in TRACKERS:
         return TRACKERS[method]
@@ -371,6 +371,8 @@ def _entry(method: str) -> Any:
         return INTERPOLATE[method]
     if method in RESTORE:
         return RESTORE[method]
+    if method in REPAIR:
+        return REPAIR[method]
     return get_method(method)
 
 
@@ -385,11 +387,11 @@ def _field_range(entry: Any, name: str, default: Any) -> str:
     an unknown word) and reading the range from its message, so the table and the
     check cannot disagree; "" when the check takes any value.
     """
-    from ..registry import FLOW, INTERPOLATE, RESTORE, TRACK
+    from ..registry import REGISTRIES
 
     if isinstance(default, bool):
         return "on/off"
-    registry = next(r for r in (FLOW, TRACK, INTERPOLATE, RESTORE) if r.get(entry.name) is entry)
+    registry = next(r for r in REGISTRIES if r.get(entry.name) is entry)
     probe: Any = "\x00?" if isinstance(default, str) else float("nan")
     try:
         registry.make_params(entry, **{name: probe})
@@ -421,6 +423,16 @@ def _field_units(meaning: str) -> str:
         if re.search(pattern, first):
             return unit
     return ""
+
+
+def flag_of(method: str, field: str) -> str:
+    """The command-line spelling of a parameter: ``--field-name``, or for a repair
+    stage of ``varflow restore`` ``--set STAGE.field=``."""
+    from ..registry import REPAIR
+
+    if method in REPAIR:
+        return f"--set {method}.{field}="
+    return "--" + field.replace("_", "-")
 
 
 def parameter_rows(method: str) -> list[tuple[str, str, str, str]]:
@@ -467,7 +479,7 @@ def parameter_table(method: str, markdown: bool = False) -> str:
     if markdown:
         lines = ["| parameter (`--flag`) | symbol | default | meaning |", "|---|---|---|---|"]
         for name, sym, default, meaning in rows:
-            flag = "--" + name.replace("_", "-")
+            flag = flag_of(method, name)
             meaning = plain_text(meaning, markdown=True).replace("|", "\\|")
             lines.append(f"| `{name}` (`{flag}`) | {sym or '—'} | `{default}` | {meaning} |")
         return "\n".join(lines)
@@ -500,6 +512,8 @@ def method_card(method: str, width: int | None = None) -> str:
     """
     import shutil
 
+    from ..registry import REPAIR
+
     m = _entry(method)
     if width is None:
         width = max(80, shutil.get_terminal_size((100, 24)).columns)
@@ -520,7 +534,7 @@ def method_card(method: str, width: int | None = None) -> str:
         text = plain_text(meaning)
         first = re.split(r"(?<=\.)\s", text, maxsplit=1)[0].rstrip(".")
         first = re.sub(r"\s*\([^()]*\)", "", first)  # the gist, without the asides
-        table.append(("*" if name in knobs else " ", "--" + name.replace("_", "-"),
+        table.append(("*" if name in knobs else " ", flag_of(m.name, name),
                       sym or "-", default, _field_range(m, name, defaults[name]) or "any",
                       _field_units(text) or "-", first))
     head = ("", "flag", "symbol", "default", "range", "unit", "meaning")
@@ -528,7 +542,9 @@ def method_card(method: str, width: int | None = None) -> str:
     lines = [f"{m.name}: {m.use}" if m.use else m.name,
              textwrap.fill(f"How: {plain_text(m.description)}.", width),
              f"* = the knobs worth changing; every flag goes after 'varflow COMMAND --method "
-             f"{m.name}'.", ""]
+             f"{m.name}'." if m.name not in REPAIR else
+             f"* = the knobs worth changing; set with 'varflow restore --{m.name} --set "
+             f"{m.name}.FIELD=VALUE'.", ""]
     for r in [head, *table]:
         line = (f"{r[0]} {r[1]:<{cols[1]}}  {r[2]:<{cols[2]}}  {r[3]:>{cols[3]}}  "
                 f"{r[4]:<{cols[4]}}  {r[5]:<{cols[5]}}  ")

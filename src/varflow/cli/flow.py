@@ -271,13 +271,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_methods(args: argparse.Namespace) -> int:
-    from ..registry import RESTORE
+    from ..registry import REPAIR, RESTORE
     from ..retime.methods import INTERPOLATORS
 
     kinds = (("two-frame flow (varflow flow --method)", METHODS),
              ("trajectories (varflow track --method)", TRACKERS),
              ("frame interpolation (varflow interpolate / retime --method)", INTERPOLATORS),
-             ("denoising (varflow denoise --method)", RESTORE))
+             ("denoising (varflow denoise --method)", RESTORE),
+             ("repair stages (varflow restore --STAGE)", REPAIR))
     if args.name is not None:
         if not any(args.name in registry for _, registry in kinds):
             names = ", ".join(n for _, registry in kinds for n in registry)

@@ -14,6 +14,9 @@
   outliers along the motion, filled from the neighbours, with the mask of what changed.
 * :mod:`varflow.restore.stabilise` -- :func:`varflow.stabilise`: gate weave removed
   from a robust global fit to the flows and a smoothed camera path.
+* :mod:`varflow.restore.chain` -- :func:`varflow.restore_clip` and the streaming
+  :func:`~varflow.restore.chain.iter_restore`: the stages chained in the order of
+  practice (stabilise, deflicker, dirt, denoise).
 * :mod:`varflow.restore.video` -- a video or a frame folder denoised into a video
   or a frame folder (``varflow denoise`` and ``varflow batch denoise``).
 """

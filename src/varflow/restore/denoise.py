@@ -16,7 +16,8 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,7 @@ from scipy import ndimage
 from ..registry import RESTORE
 from ._nlbayes import accumulate_pass, denoise_pass, normalise
 
-__all__ = ["OPPONENT", "clip_flows", "denoise", "run_nlbayes"]
+__all__ = ["OPPONENT", "clip_flows", "denoise", "iter_denoise", "mark_cuts", "run_nlbayes"]
 
 log = logging.getLogger(__name__)
 
@@ -485,9 +486,51 @@ class _Segment:
         return [_opponent(f[None], inverse=True)[0] for f in out]
 
 
+def mark_cuts(frames: Iterable[np.ndarray], is_cut: Callable[..., bool] | None
+              ) -> Iterator[tuple[np.ndarray, bool]]:
+    """``(frame, cut)`` for every frame of a stream, ``cut`` True when a scene cut lies
+    between the previous frame and this one.
+
+    A frame is given out once the next one is read: the test between frames ``j - 1``
+    and ``j`` also looks at ``j - 2`` and ``j + 1``.
+
+    Parameters
+    ----------
+    frames : iterable of ndarray
+    is_cut : callable or None
+        ``is_cut(frame0, frame1, previous=..., following=...) -> bool`` (e.g.
+        :func:`varflow.retime.stream.is_scene_cut`); None: one scene (every ``cut``
+        False).
+    """
+    window: list[np.ndarray] = []  # the last four frames
+    held: np.ndarray | None = None
+    for i, a in enumerate(frames):
+        window.append(a)
+        if len(window) > 4:
+            window.pop(0)
+        if held is not None:
+            cut = is_cut is not None and i >= 2 and bool(is_cut(
+                window[-3], window[-2], previous=window[-4] if len(window) == 4 else None,
+                following=a))
+            yield held, cut
+        held = a
+    if held is not None:
+        n = len(window)
+        cut = is_cut is not None and n >= 2 and bool(is_cut(
+            window[-2], window[-1], previous=window[-3] if n >= 3 else None, following=None))
+        yield held, cut
+
+
+def _unmark(pairs: Iterable[tuple[np.ndarray, bool]], flags: deque[bool]
+            ) -> Iterator[np.ndarray]:
+    for a, cut in pairs:
+        flags.append(bool(cut))
+        yield a
+
+
 def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = None, *,
                  params: Any = None, chunk: int = 8,
-                 is_cut: Callable[..., bool] | None = None,
+                 is_cut: Callable[..., bool] | None = None, marked: bool = False,
                  stats: dict | None = None, **overrides: Any) -> Any:
     """Denoise a stream of frames with bounded memory; yield the frames in order.
 
@@ -512,6 +555,10 @@ def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = N
         ``is_cut(frame0, frame1, previous=..., following=...) -> bool`` (e.g.
         :func:`varflow.retime.stream.is_scene_cut`): no patch is searched across
         a cut.  None: one scene.
+    marked : bool
+        ``frames`` yields ``(frame, cut)`` pairs whose ``cut`` says that a scene
+        cut precedes the frame (as :func:`mark_cuts` gives them; ``is_cut`` is then
+        not used).  Default False.
     stats : dict, optional
         Gains ``sigma``, ``frames`` and ``cuts``.
     **overrides
@@ -534,6 +581,9 @@ def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = N
         raise ValueError(f"chunk: must be an integer >= 1, got {chunk!r}")
     stats = {} if stats is None else stats
     stats.update(frames=0, cuts=0)
+    flags: deque[bool] = deque()  # the given cut marks (marked), in the frames' order
+    if marked:
+        frames = _unmark(frames, flags)
     it = iter(frames)
     head: list[np.ndarray] = []
     first = None
@@ -585,7 +635,6 @@ def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = N
         return
     seg = _Segment(p, float(sigma))
     pending: list[np.ndarray] = []  # the inputs not yet given out (for grain)
-    window: list[np.ndarray] = []   # the last three raw frames (cut context)
 
     def emit(outs: list[np.ndarray]) -> Any:
         for o in outs:
@@ -605,24 +654,7 @@ def iter_denoise(frames: Any, sigma: float | None = None, method: str | None = N
         seg.add(x)
         yield from emit(seg.advance(chunk, end=False))
 
-    # a frame joins its scene once the next one is read: the cut test between frames
-    # j - 1 and j looks at j - 2 and j + 1 too
-    held: np.ndarray | None = None
-    for i, a in enumerate(rest()):
-        window.append(a)
-        if len(window) > 4:
-            window.pop(0)
-        x = prepared(a, i)
-        if held is not None:
-            cut = is_cut is not None and i >= 2 and bool(is_cut(
-                window[-3], window[-2], previous=window[-4] if len(window) == 4 else None,
-                following=a))
-            yield from place(held, cut)
-        held = x
-    if held is not None:
-        n = len(window)
-        cut = is_cut is not None and n >= 2 and stats["frames"] + len(pending) > 0 and bool(
-            is_cut(window[-2], window[-1], previous=window[-3] if n >= 3 else None,
-                   following=None))
-        yield from place(held, cut)
+    marks = ((a, flags.popleft()) for a in rest()) if marked else mark_cuts(rest(), is_cut)
+    for i, (a, cut) in enumerate(marks):
+        yield from place(prepared(a, i), cut and i > 0)
     yield from emit(seg.advance(chunk, end=True))

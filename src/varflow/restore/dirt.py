@@ -23,6 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._validate import check_field
+from ..registry import REPAIR
 from ..twoframe.methods import FlowComposed
 from ..twoframe.params import TVL1Params
 from .denoise import _as_clip, _to_dtype
@@ -498,11 +499,7 @@ def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: b
     >>> float(np.abs(out - clip).max()) < 1
     True
     """
-    p = params if params is not None else DirtParams()
-    if not isinstance(p, DirtParams):
-        raise ValueError(f"params: expected DirtParams, got {type(p).__name__}")
-    if overrides:
-        p = p.replace(**overrides)
+    p = REPAIR.make_params("dirt", params, **overrides)
     clip, back = _as_clip(frames)
     t0 = time.perf_counter()
     n, h, w, _ = clip.shape

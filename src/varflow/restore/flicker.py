@@ -41,7 +41,6 @@ The whole clip is held in memory (frames, flows), as :func:`varflow.denoise` doe
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -55,6 +54,7 @@ from scipy import ndimage
 from scipy.sparse.linalg import spsolve
 
 from .._validate import check_field
+from ..registry import REPAIR
 from .denoise import _as_clip, _to_dtype
 
 __all__ = ["DeflickerParams", "deflicker"]
@@ -209,19 +209,6 @@ class DeflickerParams:
         known = isinstance(self.flow_method, str) and FLOW.get(self.flow_method) is not None
         check_field(known, "flow_method", f"unknown two-frame method {self.flow_method!r}; "
                     f"available: {', '.join(FLOW.names())}")
-
-
-def _make_params(params: DeflickerParams | None, overrides: dict[str, Any]) -> DeflickerParams:
-    """``params`` (default :class:`DeflickerParams`) with ``overrides``, checked."""
-    base = DeflickerParams() if params is None else params
-    if not isinstance(base, DeflickerParams):
-        raise ValueError(f"params: expected DeflickerParams, got {type(base).__name__}")
-    names = {f.name for f in dataclasses.fields(DeflickerParams)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ValueError(f"{', '.join(unknown)}: not a parameter of deflicker "
-                         f"(valid: {', '.join(sorted(names))})")
-    return dataclasses.replace(base, **overrides) if overrides else base
 
 
 # --------------------------------------------------------------------------- bases
@@ -619,7 +606,7 @@ def deflicker(frames: Any, params: DeflickerParams | None = None, *, flows: Any 
     >>> bool(np.abs(out.mean(axis=(1, 2)) - clean.mean(axis=(1, 2))).max() < 1.0)
     True
     """
-    p = _make_params(params, overrides)
+    p = REPAIR.make_params("deflicker", params, **overrides)
     clip, back = _as_clip(frames)
     dtype = clip.dtype
     t0 = time.perf_counter()

@@ -1,8 +1,12 @@
-"""The restoration methods, registered in :data:`varflow.registry.RESTORE`.
+"""The restoration methods, registered in :data:`varflow.registry.RESTORE` (denoisers)
+and :data:`varflow.registry.REPAIR` (the repair stages of archival defects).
 
 Each :class:`~varflow.registry.Restorer` names its parameter defaults (a frozen
 dataclass) and its ``run`` function; :func:`varflow.restore.denoise.denoise` (re-exported
-as :func:`varflow.denoise`) runs one.
+as :func:`varflow.denoise`) runs one.  Each :class:`~varflow.registry.Repairer`
+(``stabilise``, ``deflicker``, ``dirt``) wraps the stage function of its module with
+its parameter class, its place in the chain and the temporal context it needs;
+:func:`varflow.restore.chain.iter_restore` runs them in order.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .._validate import check_field
-from ..registry import RESTORE, MemoryFactors, Restorer
+from ..registry import REPAIR, RESTORE, MemoryFactors, Repairer, Restorer
 from ..twoframe.methods import FlowComposed
 from ..twoframe.params import TVL1Params
 
@@ -216,3 +220,93 @@ def get_restorer(name: str) -> Restorer:
 def make_restore_params(method: str | Restorer, params: Any = None, **overrides: Any) -> Any:
     """``RESTORE.make_params``: a restoration method's parameters."""
     return RESTORE.make_params(method, params, **overrides)
+
+
+# --------------------------------------------------------------------------- repair stages
+
+
+def _stabilise_defaults() -> Any:
+    from .stabilise import StabiliseParams
+
+    return StabiliseParams()
+
+
+def _deflicker_defaults() -> Any:
+    from .flicker import DeflickerParams
+
+    return DeflickerParams()
+
+
+def _dirt_defaults() -> Any:
+    from .dirt import DirtParams
+
+    return DirtParams()
+
+
+def _run_stabilise(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+    from .stabilise import stabilise
+
+    return stabilise(clip, params, callback=callback, stats=stats), None
+
+
+def _run_deflicker(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+    from .flicker import deflicker
+
+    return deflicker(clip, params, callback=callback, stats=stats), None
+
+
+def _run_dirt(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+    from .dirt import remove_dirt
+
+    return remove_dirt(clip, params, return_mask=True, callback=callback, stats=stats)
+
+
+def _stabilise_context(p: Any) -> int:
+    # the path smoother's Gaussian is cut at 4 σ; the border fill looks fill_radius
+    # frames further; an infinite σ (one fit to the whole clip) needs the whole scene
+    if math.isinf(p.smooth):
+        return 1 << 30
+    return int(math.ceil(4 * p.smooth)) + p.fill_radius + 1
+
+
+def _deflicker_context(p: Any) -> int:
+    # neighbours matched, the brightness path's local fit (whose own reach is a
+    # window further through the robust weights) and its step test
+    return p.radius + 2 * p.window + p.persist
+
+
+REPAIR.register(Repairer(
+    name="stabilise",
+    description="gate weave removed: a robust similarity (or affine) fit to the flows, "
+    "a smoothed camera path, uncovered borders filled from the neighbours",
+    defaults=_stabilise_defaults,
+    use="jitter of the picture in the gate or a shaky camera; pans and zooms are kept",
+    knobs=(("smooth", "σ of the path smoother in frames: larger removes slower shake"),
+           ("model", "similarity (shift, rotation, scale) or affine")),
+    run=_run_stabilise,
+    order=0,
+    context=_stabilise_context,
+))
+REPAIR.register(Repairer(
+    name="deflicker",
+    description="flicker removed: smooth gain and offset fields against the "
+    "motion-compensated neighbours, corrected toward a smoothed brightness path",
+    defaults=_deflicker_defaults,
+    use="brightness pumping from frame to frame; fades and lights that stay are kept",
+    knobs=(("window", "half-width of the brightness smoothing in frames"),
+           ("degree", "polynomial degree of the gain field: 0 is a global gain")),
+    run=_run_deflicker,
+    order=1,
+    context=_deflicker_context,
+))
+REPAIR.register(Repairer(
+    name="dirt",
+    description="dust, dirt and hairs removed: spikes in time along the flows, filled "
+    "from the neighbours (Kokaram 1998); the mask of what changed",
+    defaults=_dirt_defaults,
+    use="blotches on one frame only; sensitivity trades recall for precision",
+    knobs=(("sensitivity", "above 1 finds fainter dirt and touches more picture"),),
+    run=_run_dirt,
+    order=2,
+    context=lambda p: 3,
+))

@@ -31,7 +31,6 @@ The method, per clip:
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -44,6 +43,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._validate import check_field
+from ..registry import REPAIR
 from .denoise import _as_clip, _to_dtype
 
 __all__ = ["MODELS", "StabiliseParams", "fit_global_motion", "smooth_path", "stabilise"]
@@ -195,19 +195,6 @@ class StabiliseParams:
                     f"must be True or False, got {self.fill_match!r}")
         check_field(self.interpolation in _INTERPOLATIONS, "interpolation",
                     f"expected one of {', '.join(_INTERPOLATIONS)}, got {self.interpolation!r}")
-
-
-def _make_params(params: StabiliseParams | None, overrides: dict[str, Any]) -> StabiliseParams:
-    """``params`` (default :class:`StabiliseParams`) with ``overrides`` applied."""
-    base = StabiliseParams() if params is None else params
-    check_field(isinstance(base, StabiliseParams), "params",
-                f"expected StabiliseParams, got {type(base).__name__}")
-    names = {f.name for f in dataclasses.fields(StabiliseParams)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ValueError(f"unknown parameter{'s' if len(unknown) > 1 else ''} "
-                         f"{', '.join(unknown)}; StabiliseParams has {', '.join(sorted(names))}")
-    return dataclasses.replace(base, **overrides)
 
 
 # --------------------------------------------------------------------------- global fit
@@ -752,7 +739,7 @@ def stabilise(frames: Any, params: StabiliseParams | None = None, *,
     >>> out.shape, t.shape
     ((6, 64, 80), (6, 2, 3))
     """
-    p = _make_params(params, overrides)
+    p = REPAIR.make_params("stabilise", params, **overrides)
     clip, back = _as_clip(frames)
     dtype = clip.dtype
     n, h, w, _ = clip.shape
