@@ -68,7 +68,7 @@ class NLBayesParams(FlowComposed):
     tau_final : float
         The same in the final pass, on the first estimate (whose copies of one
         patch are much closer than ``2 σ²``); it binds at low noise only, where
-        a tight threshold leaves groups too small.  Default 4.
+        a tight threshold leaves groups too small.  Default 8.
     stride : int
         Step between reference patches, pixels (at most the patch side, so
         every pixel is covered); positions already covered by an estimated
@@ -108,7 +108,7 @@ class NLBayesParams(FlowComposed):
     search: int = 7
     search_t: int = 4
     tau: float = 4.0
-    tau_final: float = 4.0
+    tau_final: float = 8.0
     stride: int = 3
     beta: float = 1.0
     flat: float = 1.05
