@@ -220,3 +220,36 @@ def test_dirt_case_on_a_carphone_crop(data_root: Path, one_numba_thread) -> None
     assert rd["psnr_untouched"] > tm["psnr_untouched"] + 10
     assert rd["psnr"] > tm["psnr"] + 10
     assert rd["seconds_per_frame"] > 0
+
+
+def test_cli_bench_restore_prints_the_table(capsys, data_root: Path, tmp_path: Path,
+                                            one_numba_thread) -> None:
+    from varflow import cli
+
+    csv = tmp_path / "restore.csv"
+    rc = cli.main(["bench", "restore", "--data", str(data_root), "--clips", "carphone",
+                   "--cases", "flicker", "--frames", "4", "--crop", "48x64",
+                   "--methods", "varflow", "--csv", str(csv), "-q"])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert out.startswith("Film-restoration protocol, first 4 frames, top-left 48x64")
+    assert "deflicker" in out and f"wrote {csv}" in out
+    lines = csv.read_text().splitlines()
+    assert len(lines) == 3 and lines[0].startswith(",".join(rs.RESTORE_CSV_FIELDS[:2]))
+    for bad, words in ((["--cases", "dust"], "--cases: unknown case 'dust'"),
+                       (["--frames", "2"], "--frames: must be at least 3"),
+                       (["--crop", "4x"], "--crop: expected HxW")):
+        rc = cli.main(["bench", "restore", "--data", str(data_root), *bad, "-q"])
+        out, err = capsys.readouterr()
+        assert rc == 2 and not out and words in err and len(err.splitlines()) == 1, err
+
+
+def test_format_chain_timing() -> None:
+    result = {"clip": "bigbuckbunny", "frames": 24, "width": 960, "height": 540,
+              "stages": ["stabilise", "dirt"], "chunk": 24, "flow_seconds": 2.0,
+              "stage_seconds": {"stabilise": 0.5, "dirt": 3.0}, "chain_seconds": 3.5,
+              "ratio": 1.75}
+    text = rs.format_chain_timing(result)
+    assert "one default varflow.flow on a pair: 2.00 s" in text
+    assert "| stabilise | 0.50 | 0.25 |" in text and "| dirt | 3.00 | 1.50 |" in text
+    assert text.splitlines()[-1] == "| chain (stabilise + dirt) | 3.50 | 1.75 |"

@@ -114,3 +114,47 @@ def test_bad_inputs_one_line_and_no_output(capsys, tmp_path: Path) -> None:
     one_line_error(rc, stdout, err)
     assert not out.exists()
     no_leftovers(tmp_path)
+
+
+def test_batch_restore_writes_and_resumes(capsys, sources, tmp_path: Path) -> None:
+    pytest.importorskip("distributed")
+    import sqlite3
+
+    out = tmp_path / "out"
+    args = ("batch", "restore", sources["video"], sources["folder"], "-o", out, "--dirt",
+            "--set", "dirt.sensitivity=1.0", "--workers", "1", "-q")
+    rc, stdout, err = run(capsys, *args)
+    assert rc == 0, err
+    assert "2 tasks: 2 done, 0 skipped, 0 failed" in stdout
+    dirty, truth = dirty_clip()
+    for name in ("dirty", "frames"):
+        restored = np.stack(read_frames(out / f"{name}.mkv"))
+        assert restored.shape == dirty.shape
+        inside = np.abs(restored.astype(float) - dirty)[truth].mean()
+        assert inside > 40, (name, inside)  # the blotches were replaced
+    with sqlite3.connect(f"file:{out / 'manifest.sqlite'}?mode=ro", uri=True) as conn:
+        rows = dict(conn.execute("SELECT task_id, method FROM tasks").fetchall())
+    assert rows == {"dirty/dirty.mkv": "dirt", "frames/frames.mkv": "dirt"}
+    rc, stdout, err = run(capsys, *args)  # a second run: nothing to do
+    assert rc == 0 and "2 tasks: 0 done, 2 skipped, 0 failed" in stdout, err
+    rc, stdout, err = run(capsys, *args[:-3], "--set", "dirt.sensitivity=2", "-q")
+    one_line_error(rc, stdout, err, "--overwrite")  # other settings: refused
+    one_line_error(*run(capsys, *args, "--zarr"), "--zarr")
+
+
+def test_chain_params_identify_a_batch() -> None:
+    from varflow.batch.plan import BatchConfig, plan_tasks
+    from varflow.restore.chain import ChainParams
+
+    chain = ChainParams.resolve(["dirt", "denoise"], {"dirt": {"sensitivity": 1.5}},
+                                "nlbayes-fast")
+    assert chain.label == "dirt+nlbayes-fast" and chain.stages == ("dirt", "denoise")
+    kw = chain.as_kwargs()
+    assert kw["stages"] == ["dirt", "denoise"] and kw["params"]["dirt"].sensitivity == 1.5
+    cfg = BatchConfig("restore", chain.label, chain, fmt="mkv")
+    assert [t.output for t in plan_tasks("a", 10, cfg)] == ["a.mkv"]
+    other = BatchConfig("restore", chain.label, ChainParams.resolve(
+        ["dirt", "denoise"], None, "nlbayes-fast"), fmt="mkv")
+    assert cfg.fingerprint("1") != other.fingerprint("1")
+    with pytest.raises(ValueError, match="--format"):
+        BatchConfig("restore", chain.label, chain, fmt="gif")

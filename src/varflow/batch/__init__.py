@@ -25,7 +25,8 @@ zarrsink
     The optional Zarr mirror (``--zarr``).
 
 The task of ``varflow batch denoise`` is :func:`varflow.restore.video.denoise_video`,
-the work of ``varflow denoise``.
+the work of ``varflow denoise``; that of ``varflow batch restore`` is
+:func:`varflow.restore.video.restore_video`, the work of ``varflow restore``.
 
 The ``varflow batch`` sub-command is :mod:`varflow.cli.batch`.  This package needs
 the ``batch`` extra (dask, distributed, zarr: ``pip install "varflow[batch]"``); the

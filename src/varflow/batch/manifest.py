@@ -9,7 +9,7 @@ Tables
 ------
 ``tasks``
     One row per task: ``task_id`` (``"<name>/<output file name>"``), ``input``
-    (path), ``name``, ``kind`` (``flow``/``track``/``retime``/``denoise``), ``frames``
+    (path), ``name``, ``kind`` (``flow``/``track``/``retime``/``denoise``/``restore``), ``frames``
     (JSON list of frame indices), ``method``, ``params`` (JSON of the parameter
     dataclass), ``version`` (varflow's), ``output`` (path relative to OUT),
     ``checksum`` (SHA-256 hex of the output once done), ``status``, ``error``,

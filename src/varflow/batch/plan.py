@@ -29,6 +29,11 @@ Denoising (``varflow batch denoise``)
     :func:`varflow.restore.video.denoise_video` (σ given on the 0-255 scale, or
     estimated per input) to ``OUT/<name>.<format>`` (``mkv`` by default: lossless
     FFV1; lossless in the other containers where they allow it), audio copied.
+
+Restoration (``varflow batch restore``)
+    The same, through :func:`varflow.restore.video.restore_video`: the stages of a
+    :class:`varflow.restore.chain.ChainParams` (its ``params``; ``method`` names the
+    stages, e.g. ``"deflicker+dirt"``).
 """
 
 from __future__ import annotations
@@ -55,8 +60,10 @@ __all__ = [
 FLOW_FORMATS = ("flo", "png")
 #: Output formats (video containers) of ``varflow batch retime``.
 RETIME_FORMATS = ("mkv", "mp4", "mov", "avi", "webm", "m4v")
-#: Output formats (video containers) of ``varflow batch denoise``.
+#: Output formats (video containers) of ``varflow batch denoise`` and ``restore``.
 DENOISE_FORMATS = RETIME_FORMATS
+#: The kinds whose task is one whole video per input.
+VIDEO_KINDS = ("retime", "denoise", "restore")
 
 
 @dataclass(frozen=True)
@@ -66,12 +73,14 @@ class BatchConfig:
     Attributes
     ----------
     kind : str
-        ``"flow"``, ``"track"``, ``"retime"`` or ``"denoise"``.
+        ``"flow"``, ``"track"``, ``"retime"``, ``"denoise"`` or ``"restore"``.
     method : str
         Registered two-frame method (flow), trajectory method (track),
-        interpolation method (retime) or restoration method (denoise).
+        interpolation method (retime), restoration method (denoise), or the stages
+        joined by ``+`` (restore).
     params : dataclass instance
-        The method's parameters.
+        The method's parameters (restore: a
+        :class:`~varflow.restore.chain.ChainParams`).
     fmt : str
         ``"flo"`` or ``"png"`` for flow; ``"npz"`` for track; a video extension of
         :data:`RETIME_FORMATS` for retime, of :data:`DENOISE_FORMATS` for denoise.
@@ -87,14 +96,15 @@ class BatchConfig:
         Slow-motion factor (retime; exactly one of ``fps`` and ``slowmo``).
     input_fps : str, optional
         Source rate of frame folders / override of the videos' rates (retime,
-        denoise).
+        denoise, restore).
     codec : str, optional
-        Video encoder (retime: default after ``fmt``; denoise: default lossless).
+        Video encoder (retime: default after ``fmt``; denoise, restore: default
+        lossless).
     sigma : float, optional
-        Noise standard deviation on the 0-255 scale (denoise; None: estimated per
-        input).
+        Noise standard deviation on the 0-255 scale (denoise, restore; None:
+        estimated per input).
     scene_cuts : bool
-        Search no patch across a scene cut (denoise).
+        Look across no scene cut (denoise, restore).
     """
 
     kind: str
@@ -135,7 +145,7 @@ class BatchConfig:
                 raise ValueError("give exactly one of --fps and --slowmo")
             if self.slowmo is not None and (isinstance(self.slowmo, bool) or self.slowmo < 2):
                 raise ValueError(f"--slowmo: must be an integer >= 2, got {self.slowmo}")
-        elif self.kind == "denoise":
+        elif self.kind in ("denoise", "restore"):
             if self.fmt not in DENOISE_FORMATS:
                 raise ValueError(f"--format: expected one of {', '.join(DENOISE_FORMATS)}")
             s = self.sigma
@@ -167,7 +177,7 @@ class BatchConfig:
         elif self.kind == "retime":
             ident.update({"fps": self.fps, "slowmo": self.slowmo, "input_fps": self.input_fps,
                           "codec": self.codec})
-        elif self.kind == "denoise":
+        elif self.kind in ("denoise", "restore"):
             ident.update({"sigma": self.sigma, "input_fps": self.input_fps,
                           "codec": self.codec, "scene_cuts": self.scene_cuts})
         else:
@@ -205,7 +215,7 @@ class Task:
         The input's output name.
     frames : tuple of int
         ``(i, j)`` for a pair (flow from frame i to frame j), the window's frame
-        indices for track, the first and last frame for retime and denoise.
+        indices for track, the first and last frame for retime, denoise and restore.
     output : str
         Output path relative to the output folder (``/``-separated).
     index : int
@@ -353,7 +363,7 @@ def plan_tasks(name: str, n_frames: int, config: BatchConfig) -> list[Task]:
         When the input is too short to give any task.
     """
     tasks: list[Task] = []
-    if config.kind in ("retime", "denoise"):
+    if config.kind in VIDEO_KINDS:
         if config.kind == "retime" and n_frames < 2:
             raise ValueError(f"only {n_frames} frame(s): retiming needs at least 2")
         if n_frames < 1:

@@ -61,7 +61,7 @@ from typing import Any
 from .._errors import error_line
 from .inputs import BatchInput, InputProbe, probe_input
 from .manifest import INPUT_TASK, MANIFEST_NAME, Manifest
-from .plan import BatchConfig, Task, plan_tasks
+from .plan import VIDEO_KINDS, BatchConfig, Task, plan_tasks
 from .worker import PinThreads, WorkItem, run_item, sha256_file, thread_environment
 
 __all__ = ["BatchSummary", "run_batch"]
@@ -94,7 +94,7 @@ class BatchSummary:
     seconds : float
         Wall time of the computing phase.
     unit : str
-        ``"pairs"``, ``"windows"`` or ``"videos"`` (retime, denoise).
+        ``"pairs"``, ``"windows"`` or ``"videos"`` (retime, denoise, restore).
     failures : list of (str, str)
         ``(task_id, error)`` of every failure.
     """
@@ -175,7 +175,7 @@ def _clean_stale(out: Path, names: Sequence[str], kind: str = "flow") -> int:
     """Delete temporary files of killed writers; returns how many."""
     count = 0
     for name in names:
-        if kind in ("retime", "denoise"):  # OUT/.<name>.XXXX.<ext> of the video writer
+        if kind in VIDEO_KINDS:  # OUT/.<name>.XXXX.<ext> of the video writer
             for p in out.glob(f".{glob.escape(name)}.*"):
                 if p.is_file():
                     p.unlink(missing_ok=True)
@@ -303,7 +303,7 @@ def _sink_write(sink: Any, task: Task, manifest: Manifest, summary: BatchSummary
 def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
                version: str) -> WorkItem:
     source: str | tuple[str, ...]
-    if pl.probe.files is not None and config.kind not in ("retime", "denoise"):
+    if pl.probe.files is not None and config.kind not in VIDEO_KINDS:
         source = tuple(pl.probe.files[i] for i in task.frames)
     else:
         source = str(pl.inp.path)
@@ -320,7 +320,7 @@ def _work_item(pl: _Planned, task: Task, config: BatchConfig, out: Path,
         retime=None if config.kind != "retime" else {
             "fps": config.fps, "slowmo": config.slowmo, "input_fps": config.input_fps,
             "codec": config.codec},
-        denoise=None if config.kind != "denoise" else {
+        denoise=None if config.kind not in ("denoise", "restore") else {
             "sigma": config.sigma, "input_fps": config.input_fps, "codec": config.codec,
             "scene_cuts": config.scene_cuts},
     )
@@ -440,7 +440,7 @@ def run_batch(
     command: Any = None,
     max_in_flight: int | None = None,
 ) -> BatchSummary:
-    """Run (or resume) a batch of flow, trajectory, retime or denoise tasks.
+    """Run (or resume) a batch of flow, trajectory, retime, denoise or restore tasks.
 
     Parameters
     ----------

@@ -4,7 +4,8 @@ A task reads only the frames it needs (a video is opened with
 ``read_frames(path, start=..., stop=..., step=...)``, a frame folder by the task's
 own frame files; a retime task streams its whole input through
 :func:`varflow.retime.stream.retime_video`, a denoise task through
-:func:`varflow.restore.video.denoise_video`), writes its output with the atomic
+:func:`varflow.restore.video.denoise_video`, a restore task through
+:func:`varflow.restore.video.restore_video`), writes its output with the atomic
 writers of :mod:`varflow.io` and returns a small result dictionary; it never touches the manifest.
 
 Threads: every task runs single-threaded (Numba, OpenCV); a worker runs as many
@@ -99,7 +100,7 @@ class WorkItem:
     ----------
     task_id : str
     kind : str
-        ``"flow"``, ``"track"``, ``"retime"`` or ``"denoise"``.
+        ``"flow"``, ``"track"``, ``"retime"``, ``"denoise"`` or ``"restore"``.
     method : str
     params : dataclass instance
     source : str or tuple of str
@@ -118,7 +119,7 @@ class WorkItem:
         ``fps``, ``slowmo``, ``input_fps``, ``codec`` of a retime task (``source``
         is then the video or the frame folder).
     denoise : dict, optional
-        ``sigma``, ``input_fps``, ``codec``, ``scene_cuts`` of a denoise task
+        ``sigma``, ``input_fps``, ``codec``, ``scene_cuts`` of a denoise or restore task
         (``source`` is then the video or the frame folder).
     """
 
@@ -187,6 +188,13 @@ def _compute(item: WorkItem) -> None:
         assert item.denoise is not None and isinstance(item.source, str)
         out.parent.mkdir(parents=True, exist_ok=True)
         denoise_video(item.source, out, method=item.method, params=item.params, **item.denoise)
+        return
+    if item.kind == "restore":
+        from ..restore.video import restore_video
+
+        assert item.denoise is not None and isinstance(item.source, str)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        restore_video(item.source, out, **item.params.as_kwargs(), **item.denoise)
         return
     frames = _read(item)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,5 @@
-"""``varflow batch``: flow, trajectories, retiming or denoising of many inputs on Dask.
+"""``varflow batch``: flow, trajectories, retiming, denoising or restoration of many
+inputs on Dask.
 
 Synopsis::
 
@@ -17,9 +18,15 @@ Synopsis::
                           [--format mkv|mp4|...] [--codec C] [--no-scene-cuts]
                           [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
                           [--overwrite] [--quiet] [--<parameter> VALUE ...]
+    varflow batch restore INPUT... -o OUT [--stabilise] [--deflicker] [--dirt]
+                          [--denoise] [--sigma S] [--denoise-method M]
+                          [--set STAGE.FIELD=VALUE ...] [--input-fps R]
+                          [--format mkv|mp4|...] [--codec C] [--no-scene-cuts]
+                          [--workers N] [--threads-per-worker T] [--scheduler ADDRESS]
+                          [--overwrite] [--quiet]
 
-The work is done by :mod:`varflow.batch` (one task per input for ``retime`` and
-``denoise``).  Needs the ``batch`` extra (dask, distributed, zarr: ``pip install
+The work is done by :mod:`varflow.batch` (one task per input for ``retime``,
+``denoise`` and ``restore``).  Needs the ``batch`` extra (dask, distributed, zarr: ``pip install
 "varflow[batch]"``); without it the command stops with one line naming the extra.
 
 Exit status: 0 when every task is done, 1 when some input or task failed (after
@@ -72,12 +79,14 @@ BATCH_EXTRA = ("dask", "distributed", "zarr")
 
 _DESCRIPTION = (
     "Compute flow between frame pairs (flow), trajectories over windows of frames "
-    "(track), retimed videos (retime) or denoised videos (denoise) for many inputs on "
+    "(track), retimed videos (retime), denoised videos (denoise) or restored videos "
+    "(restore) for many inputs on "
     "Dask: a local cluster of "
     "--workers processes by default, or an existing scheduler.  INPUT is a video, a "
     "folder of frames, a folder of videos, a glob pattern or "
     "an input list (.txt/.lst/.list/.jsonl: one path or {\"path\": ..., \"name\": ...} "
-    "per line); results go to OUT/<name>/ (retime, denoise: OUT/<name>.<format>) with <name> the "
+    "per line); results go to OUT/<name>/ (retime, denoise, restore: OUT/<name>.<format>) "
+    "with <name> the "
     "video's file name without extension or the folder's name (two inputs with one name "
     "are an error).  Every "
     "task is recorded in OUT/manifest.sqlite; running the same command again after an "
@@ -235,6 +244,27 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     _add_param_flags(d, _collect_params(RESTORE), RESTORE, chosen_methods(argv, RESTORE))
     d.set_defaults(func=_cmd_batch_denoise)
 
+    from .restore import add_chain_flags
+
+    s = bsub.add_parser("restore", parents=[common, shared],
+                        help="restored videos: OUT/<name>.<format>",
+                        description="Restore every input (a video or a folder of frames) "
+                        "as 'varflow restore' does: the stages named (all when none is: "
+                        "stabilise, deflicker, dirt, denoise) in that order, one task per "
+                        "input, written to OUT/<name>.<format> (lossless where the container "
+                        "allows it, audio copied, scene cuts respected).")
+    add_chain_flags(s)
+    s.add_argument("--input-fps", type=rate_arg, metavar="R",
+                   help="source frame rate (default: the video's own; 25 for a folder)")
+    s.add_argument("--format", default="mkv", metavar="EXT",
+                   help="output container: mkv (lossless FFV1, default), mp4, mov, avi, "
+                   "webm or m4v")
+    s.add_argument("--codec", metavar="C",
+                   help="FFmpeg encoder (default: lossless, after the format)")
+    s.add_argument("--no-scene-cuts", dest="scene_cuts", action="store_false",
+                   help="one scene: stages look across scene cuts too")
+    s.set_defaults(func=_cmd_batch_restore)
+
 
 def _cmd_batch_flow(args: argparse.Namespace) -> int:
     require_batch_extra()
@@ -281,6 +311,20 @@ def _cmd_batch_denoise(args: argparse.Namespace) -> int:
         raise ValueError("--zarr: not available for batch denoise (its outputs are videos)")
     entry, params = resolve_denoise(args)
     config = BatchConfig("denoise", entry.name, params, fmt=args.format.lower().lstrip("."),
+                         input_fps=_rate_text(args.input_fps), codec=args.codec,
+                         sigma=args.sigma, scene_cuts=args.scene_cuts)
+    return _run(args, config)
+
+
+def _cmd_batch_restore(args: argparse.Namespace) -> int:
+    require_batch_extra()
+    from ..batch.plan import BatchConfig
+    from .restore import resolve_chain
+
+    if args.zarr:
+        raise ValueError("--zarr: not available for batch restore (its outputs are videos)")
+    chain = resolve_chain(args)
+    config = BatchConfig("restore", chain.label, chain, fmt=args.format.lower().lstrip("."),
                          input_fps=_rate_text(args.input_fps), codec=args.codec,
                          sigma=args.sigma, scene_cuts=args.scene_cuts)
     return _run(args, config)

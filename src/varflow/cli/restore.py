@@ -42,7 +42,7 @@ from ._common import (
 )
 from .denoise import SIGMA_HELP, sigma_arg
 
-__all__ = ["add_parser", "parse_settings", "summary_line"]
+__all__ = ["add_chain_flags", "add_parser", "parse_settings", "resolve_chain", "summary_line"]
 
 log = logging.getLogger("varflow.cli")
 
@@ -82,15 +82,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="video (.mkv: lossless FFV1; .mp4: lossless H.264; ...) or folder of "
                    "PNG frames of the input's bit depth")
-    for name, text in _STAGE_FLAGS:
-        p.add_argument(f"--{name}", action="store_true", help=text)
-    p.add_argument("--sigma", type=sigma_arg, metavar="S", help=SIGMA_HELP)
-    p.add_argument("--denoise-method", default=RESTORE.default, metavar="NAME",
-                   help=f"the denoiser (default {RESTORE.default}; "
-                   f"{', '.join(RESTORE.names())})")
-    p.add_argument("--set", dest="settings", action="append", default=[],
-                   metavar="STAGE.FIELD=VALUE",
-                   help="a stage's parameter, e.g. dirt.sensitivity=1.5 (repeatable)")
+    add_chain_flags(p)
     p.add_argument("--mask-video", metavar="MASK",
                    help="also write the dirt stage's mask (white: replaced) as a video "
                    "or a folder of PNG frames")
@@ -115,6 +107,30 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar, no compile notice")
     p.set_defaults(func=_cmd_restore)
+
+
+def add_chain_flags(p: argparse.ArgumentParser) -> None:
+    """The stage flags, ``--sigma``, ``--denoise-method`` and ``--set`` (shared with
+    ``varflow batch restore``)."""
+    for name, text in _STAGE_FLAGS:
+        p.add_argument(f"--{name}", action="store_true", help=text)
+    p.add_argument("--sigma", type=sigma_arg, metavar="S", help=SIGMA_HELP)
+    p.add_argument("--denoise-method", default=RESTORE.default, metavar="NAME",
+                   help=f"the denoiser (default {RESTORE.default}; "
+                   f"{', '.join(RESTORE.names())})")
+    p.add_argument("--set", dest="settings", action="append", default=[],
+                   metavar="STAGE.FIELD=VALUE",
+                   help="a stage's parameter, e.g. dirt.sensitivity=1.5 (repeatable)")
+
+
+def resolve_chain(args: argparse.Namespace) -> Any:
+    """The :class:`~varflow.restore.chain.ChainParams` of the stage flags (all stages
+    when none is given) and ``--set``; errors before any work."""
+    from ..restore.chain import STAGES, ChainParams
+
+    stages = [name for name in STAGES if getattr(args, name)] or list(STAGES)
+    params = parse_settings(args.settings, stages, args.denoise_method)
+    return ChainParams.resolve(stages, params, args.denoise_method)
 
 
 def _value(text: str, default: Any, flag: str) -> Any:
@@ -169,27 +185,25 @@ def parse_settings(settings: Sequence[str], stages: Sequence[str],
 
 
 def _cmd_restore(args: argparse.Namespace) -> int:
-    from ..restore.chain import STAGES, resolve_stages
     from ..restore.video import restore_video
 
-    stages = [name for name in STAGES if getattr(args, name)] or list(STAGES)
-    params = parse_settings(args.settings, stages, args.denoise_method)
-    resolved = resolve_stages(stages, params, args.denoise_method)  # errors before any work
+    chain = resolve_chain(args)
     _claim_inputs((args.source, "IN"))
     _claim(Path(args.output), "-o/--output")
     if args.mask_video is not None:
-        if "dirt" not in stages:
+        if "dirt" not in chain.stages:
             raise ValueError("--mask-video: the dirt stage is not run (add --dirt)")
         _claim(Path(args.mask_video), "--mask-video")
-    for name, entry, p in resolved:
+    for name, p in chain.params:
         flow_method = getattr(p, "flow_method", None)
         if flow_method is not None:
-            _compile_notice(flow_method, args.quiet, entry if name == "denoise" else None)
+            entry = RESTORE[chain.denoise_method] if name == "denoise" else None
+            _compile_notice(flow_method, args.quiet, entry)
             break
     with _Progress("restore", args.quiet, unit="frame") as progress:
         s = restore_video(
-            args.source, args.output, stages, sigma=args.sigma, params=params,
-            denoise_method=args.denoise_method, mask=args.mask_video, start=args.start,
+            args.source, args.output, **chain.as_kwargs(), sigma=args.sigma,
+            mask=args.mask_video, start=args.start,
             stop=args.stop, input_fps=args.input_fps, codec=args.codec,
             quality=args.quality, audio=args.audio, scene_cuts=args.scene_cuts,
             chunk=args.chunk, callback=progress,

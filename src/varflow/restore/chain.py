@@ -34,7 +34,8 @@ import numpy as np
 from ..registry import REPAIR, RESTORE
 from .denoise import _to_dtype, iter_denoise, mark_cuts
 
-__all__ = ["DENOISE", "STAGES", "iter_restore", "resolve_stages", "restore_clip"]
+__all__ = ["DENOISE", "STAGES", "ChainParams", "iter_restore", "resolve_stages",
+           "restore_clip"]
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +103,45 @@ def resolve_stages(stages: Iterable[str] | None = None, params: Mapping[str, Any
     return out
 
 
+@dataclass(frozen=True)
+class ChainParams:
+    """A whole chain's settings: what ``varflow batch restore`` records and runs.
+
+    Attributes
+    ----------
+    stages : tuple of str
+        The stages, in the order of the chain (:data:`STAGES`).
+    denoise_method : str or None
+        The denoiser of the ``denoise`` stage (None without it).
+    params : tuple of (str, dataclass)
+        ``(stage, parameters)`` of every stage, resolved (defaults filled in).
+    """
+
+    stages: tuple[str, ...]
+    denoise_method: str | None = None
+    params: tuple[tuple[str, Any], ...] = ()
+
+    @classmethod
+    def resolve(cls, stages: Iterable[str] | None = None,
+                params: Mapping[str, Any] | None = None,
+                denoise_method: str | None = None) -> ChainParams:
+        """The settings of :func:`resolve_stages` (same arguments, same errors)."""
+        chain = resolve_stages(stages, params, denoise_method)
+        method = next((e.name for n, e, _ in chain if n == DENOISE), None)
+        return cls(tuple(n for n, _, _ in chain), method, tuple((n, p) for n, _, p in chain))
+
+    @property
+    def label(self) -> str:
+        """The stages joined by ``+`` (with the denoiser's name): ``"dirt+nlbayes"``."""
+        return "+".join(self.denoise_method if n == DENOISE else n for n in self.stages)
+
+    def as_kwargs(self) -> dict[str, Any]:
+        """``stages``, ``params`` and ``denoise_method`` for :func:`iter_restore` and
+        :func:`varflow.restore.video.restore_video`."""
+        return {"stages": list(self.stages), "params": dict(self.params),
+                "denoise_method": self.denoise_method}
+
+
 def _scale_of(dtype: np.dtype) -> float:
     """Work values per input value: integers go to 0-255, floats stay."""
     return 255.0 / np.iinfo(dtype).max if dtype.kind in "ui" else 1.0
@@ -128,8 +168,9 @@ def _windowed(items: Iterator[_Item], name: str, entry: Any, params: Any, chunk:
             yield _Item(np.asarray(out[k - lo], np.float32), it.cut, m)
 
     for it in items:
-        if it.cut and buf:
-            yield from process(done, len(buf))
+        if it.cut:
+            if len(buf) > done:
+                yield from process(done, len(buf))
             buf, done = [], 0
         buf.append(it)
         if len(buf) - done >= step + ctx:

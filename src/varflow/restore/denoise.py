@@ -335,6 +335,7 @@ def run_nlbayes(clip: np.ndarray, sigma: float, params: Any,
     if params.passes == 2:
         out = denoise_pass(noisy, out, True, *flows, patch=params.patch_final,
                            n_similar=params.n_similar_final, frames=refs_final,
+                           dist_channels=1 if params.luma_final else 0,
                            tau=params.tau_final, n_min=_NMIN, **kw)
         tick()
     if frames is not None:
