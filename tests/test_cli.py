@@ -231,7 +231,7 @@ def test_methods_lists_registry(capsys: pytest.CaptureFixture[str]) -> None:
     from varflow.retime.methods import INTERPOLATORS
 
     entries = [*registry.METHODS.items(), *registry.TRACKERS.items(), *INTERPOLATORS.items(),
-               *registry.RESTORE.items()]
+               *registry.RESTORE.items(), *registry.REPAIR.items()]
     assert len(lines) == len(entries)
     for line, (name, m) in zip(lines, entries, strict=True):
         assert line.split()[0] == name and m.use and m.use in line  # when to use it

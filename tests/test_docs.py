@@ -62,7 +62,8 @@ def test_parameter_tables_are_the_dataclasses() -> None:
     dataclass's default."""
     import dataclasses
 
-    from varflow.registry import parameter_fields
+    from varflow.cli._common import flag_of
+    from varflow.registry import REPAIR, parameter_fields
 
     ext = _ext()
     for kind, registry in ext.registries().items():
@@ -70,7 +71,10 @@ def test_parameter_tables_are_the_dataclasses() -> None:
         for name, entry in registry.items():
             assert f"``{name}``" in text
             for field, default, _ in parameter_fields(entry):
-                assert f"``{field}`` (``--{field.replace('_', '-')}``)" in text, (name, field)
+                flag = flag_of(name, field)
+                assert flag == (f"--set {name}.{field}=" if registry is REPAIR
+                                else f"--{field.replace('_', '-')}")
+                assert f"``{field}`` (``{flag}``)" in text, (name, field)
                 assert f"``{default!r}``" in text, (name, field)
         assert all(dataclasses.is_dataclass(e.params_type) for e in registry.values())
 

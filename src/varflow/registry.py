@@ -241,11 +241,17 @@ class Repairer(Entry):
     Attributes
     ----------
     run : callable
-        ``run(clip, params, callback=None, stats=None) -> (clip, mask)`` with ``clip``
-        ``(F, H, W, C)`` float32 on the 0-255 scale and ``mask`` the ``(F, H, W)``
-        bool mask of the pixels the stage replaced (None for a stage that changes
-        every pixel); ``callback(done, total)`` reports progress; ``stats`` (a dict)
-        gains timings.
+        ``run(clip, params, callback=None, stats=None, flows=None) -> (clip, mask)``
+        with ``clip`` ``(F, H, W, C)`` float32 on the 0-255 scale and ``mask`` the
+        ``(F, H, W)`` bool mask of the pixels the stage replaced (None for a stage
+        that changes every pixel); ``callback(done, total)`` reports progress;
+        ``stats`` (a dict) gains timings; ``flows`` the stage's own flows between
+        consecutive frames (``pair_flows``' results stacked along a first axis).
+    pair_flows : callable or None
+        ``pair_flows(frame0, frame1, params)`` -> an array or a tuple of arrays: the
+        flows of one consecutive pair as the stage estimates them, so that a stream
+        repaired in overlapping windows estimates each pair once; None: the stage
+        takes no flows from outside.
     order : int
         Its place in the chain of :func:`varflow.restore.chain.iter_restore`, as
         restoration practice orders the stages: geometry first (the later stages
@@ -259,6 +265,7 @@ class Repairer(Entry):
     run: Callable[..., Any] | None = None
     order: int = 0
     context: Callable[[Any], int] | None = None
+    pair_flows: Callable[..., Any] | None = None
 
 
 class Registry(MutableMapping):

@@ -11,7 +11,10 @@ Streaming: each repair stage works on windows of ``chunk`` frames with the frame
 each side its result depends on (the stage's ``context``: the path smoother's reach
 for ``stabilise``, the brightness smoothing for ``deflicker``, the two neighbours
 each side for ``dirt``), so a frame comes out as the whole scene's run would give it
-and memory holds a few windows; the denoiser is the streaming
+and memory holds a few windows.  A stage that takes its flows from outside
+(``pair_flows`` of its entry: ``stabilise``, ``deflicker``) gets each consecutive
+pair's flows estimated once and kept while the pair is in a window, so the overlap
+costs no flow twice.  The denoiser is the streaming
 :func:`~varflow.restore.denoise.iter_denoise`.  No stage looks across a scene cut.
 
 Values: integer frames are repaired as float32 on the 0-255 scale (uint16 divided by
@@ -154,12 +157,27 @@ def _windowed(items: Iterator[_Item], name: str, entry: Any, params: Any, chunk:
     step = max(chunk, min(ctx, 4 * chunk))  # frames given out per window
     buf: list[_Item] = []
     done = 0  # index in buf of the first frame not given out
+    base = 0  # index in the scene of buf[0]
+    cache: dict[int, Any] = {}  # the pair flows from scene frame k to k + 1
+
+    def flows(lo: int, hi: int) -> Any:
+        """The stage's flows of the window buf[lo:hi], each pair estimated once."""
+        if entry.pair_flows is None or hi - lo < 2:
+            return None
+        for k in range(lo, hi - 1):
+            if base + k not in cache:
+                cache[base + k] = entry.pair_flows(buf[k].frame, buf[k + 1].frame, params)
+        pairs = [cache[base + k] for k in range(lo, hi - 1)]
+        if isinstance(pairs[0], tuple):
+            return tuple(None if parts[0] is None else np.stack(parts)
+                         for parts in zip(*pairs, strict=True))
+        return np.stack(pairs)
 
     def process(a: int, b: int) -> Iterator[_Item]:
         lo, hi = max(0, a - ctx), min(len(buf), b + ctx)
         clip = np.stack([it.frame for it in buf[lo:hi]])
         t0 = time.perf_counter()
-        out, mask = entry.run(clip, params)
+        out, mask = entry.run(clip, params, flows=flows(lo, hi))
         seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
         for k in range(a, b):
             it = buf[k]
@@ -171,12 +189,15 @@ def _windowed(items: Iterator[_Item], name: str, entry: Any, params: Any, chunk:
         if it.cut:
             if len(buf) > done:
                 yield from process(done, len(buf))
-            buf, done = [], 0
+            buf, done, base = [], 0, 0
+            cache.clear()
         buf.append(it)
         if len(buf) - done >= step + ctx:
             yield from process(done, done + step)
             keep = max(0, done + step - ctx)
-            buf, done = buf[keep:], done + step - keep
+            buf, done, base = buf[keep:], done + step - keep, base + keep
+            for k in [k for k in cache if k < base]:
+                del cache[k]
     if len(buf) > done:
         yield from process(done, len(buf))
 

@@ -57,7 +57,7 @@ from .._validate import check_field
 from ..registry import REPAIR
 from .denoise import _as_clip, _to_dtype
 
-__all__ = ["DeflickerParams", "deflicker"]
+__all__ = ["DeflickerParams", "deflicker", "pair_flows"]
 
 log = logging.getLogger(__name__)
 
@@ -309,19 +309,58 @@ def _compute_flows(clip: np.ndarray, p: DeflickerParams, lo: float, hi: float,
     return fwd, ok
 
 
+def pair_flows(frame0: np.ndarray, frame1: np.ndarray, params: DeflickerParams
+               ) -> tuple[np.ndarray, None, np.ndarray, None]:
+    """The forward flow of one pair of consecutive frames and its forward-backward
+    mask, as :func:`deflicker` estimates them (on the pair's own intensity range, which
+    the high-pass normalisation of the flow frames makes irrelevant), to be passed
+    back, stacked, as its ``flows`` by a caller that sees each pair in several windows.
+
+    Parameters
+    ----------
+    frame0, frame1 : ndarray, shape (H, W, C), float32
+    params : DeflickerParams
+
+    Returns
+    -------
+    (fwd, None, fwd_ok, None)
+        ``fwd`` ``(H, W, 2)`` float32 and ``fwd_ok`` ``(H, W)`` bool, in the form of
+        :func:`deflicker`'s ``flows`` (the backward parts are not needed).
+    """
+    from .. import flow as _flow
+    from ..compensate import consistency
+
+    pair = np.stack([frame0, frame1]).astype(np.float32)
+    lo, hi = (float(v) for v in np.percentile(pair, [0.5, 99.5]))
+    if not hi > lo:
+        lo, hi = float(pair.min()), float(pair.max())
+        if not hi > lo:
+            hi = lo + 1.0
+    a, b = _flow_frames(pair, lo, hi, params.flow_blur, params.flow_highpass)
+    kw: dict[str, Any] = dict(params=params.flow_params, max_pixels=params.flow_max_pixels)
+    fwd = _flow(a, b, params.flow_method, **kw)
+    ok = consistency(fwd, _flow(b, a, params.flow_method, **kw), alpha2=params.fb_tolerance)
+    return fwd, None, ok, None
+
+
 def _given_flows(flows: Any, n: int, h: int, w: int,
                  fb_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """The caller's ``(fwd, bwd)`` or ``(fwd, bwd, fwd_ok, bwd_ok)`` as forward flows
-    and masks (the masks computed when not given)."""
+    and masks (the masks computed when not given; with the masks, ``bwd`` and
+    ``bwd_ok`` may be None: only the forward ones are used)."""
     from ..compensate import consistency
 
     try:
-        parts = [np.asarray(a) for a in flows]
+        parts = [None if a is None else np.asarray(a) for a in flows]
     except TypeError:
         raise ValueError("flows: expected (fwd, bwd) or (fwd, bwd, fwd_ok, bwd_ok)") from None
     if len(parts) not in (2, 4):
         raise ValueError(f"flows: expected 2 or 4 arrays, got {len(parts)}")
+    if parts[0] is None or parts[2 if len(parts) == 4 else 1] is None:
+        raise ValueError("flows: fwd and fwd_ok (or bwd) must be given")
     for name, a in zip(("fwd", "bwd"), parts[:2], strict=True):
+        if a is None:
+            continue
         if a.shape != (n - 1, h, w, 2):
             raise ValueError(f"flows: {name} has shape {a.shape}, expected "
                              f"{(n - 1, h, w, 2)}")
@@ -560,8 +599,10 @@ def deflicker(frames: Any, params: DeflickerParams | None = None, *, flows: Any 
         ``(fwd, bwd)`` each ``(F - 1, H, W, 2)`` (frame s to s + 1 and s + 1 to s, in
         pixels, as :func:`varflow.restore.denoise.clip_flows` gives), optionally with
         their forward-backward masks ``(fwd, bwd, fwd_ok, bwd_ok)``
-        ``(F - 1, H, W)`` bool.  They should be computed on intensity-normalised
-        frames.  Default: computed (``flow_method`` on normalised frames).
+        ``(F - 1, H, W)`` bool (then ``bwd`` and ``bwd_ok`` may be None, as
+        :func:`pair_flows` gives them).  They should be computed on
+        intensity-normalised frames.  Default: computed (``flow_method`` on
+        normalised frames).
     callback : callable, optional
         ``callback(done, total)`` as the work progresses (flows, solves, output).
     stats : dict, optional

@@ -250,22 +250,39 @@ def _dirt_defaults() -> Any:
     return DirtParams()
 
 
-def _run_stabilise(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+def _run_stabilise(clip: Any, params: Any, callback: Any = None, stats: Any = None,
+                   flows: Any = None) -> Any:
     from .stabilise import stabilise
 
-    return stabilise(clip, params, callback=callback, stats=stats), None
+    return stabilise(clip, params, flows=flows, callback=callback, stats=stats), None
 
 
-def _run_deflicker(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+def _run_deflicker(clip: Any, params: Any, callback: Any = None, stats: Any = None,
+                   flows: Any = None) -> Any:
     from .flicker import deflicker
 
-    return deflicker(clip, params, callback=callback, stats=stats), None
+    return deflicker(clip, params, flows=flows, callback=callback, stats=stats), None
 
 
-def _run_dirt(clip: Any, params: Any, callback: Any = None, stats: Any = None) -> Any:
+def _run_dirt(clip: Any, params: Any, callback: Any = None, stats: Any = None,
+              flows: Any = None) -> Any:
     from .dirt import remove_dirt
 
+    # its flows are estimated again after a rough fill of the dirt (refine): a window's
+    # own run, not pair flows from outside
     return remove_dirt(clip, params, return_mask=True, callback=callback, stats=stats)
+
+
+def _stabilise_pair_flows(frame0: Any, frame1: Any, params: Any) -> Any:
+    from .stabilise import pair_flows
+
+    return pair_flows(frame0, frame1, params)
+
+
+def _deflicker_pair_flows(frame0: Any, frame1: Any, params: Any) -> Any:
+    from .flicker import pair_flows
+
+    return pair_flows(frame0, frame1, params)
 
 
 def _stabilise_context(p: Any) -> int:
@@ -293,6 +310,7 @@ REPAIR.register(Repairer(
     run=_run_stabilise,
     order=0,
     context=_stabilise_context,
+    pair_flows=_stabilise_pair_flows,
 ))
 REPAIR.register(Repairer(
     name="deflicker",
@@ -305,6 +323,7 @@ REPAIR.register(Repairer(
     run=_run_deflicker,
     order=1,
     context=_deflicker_context,
+    pair_flows=_deflicker_pair_flows,
 ))
 REPAIR.register(Repairer(
     name="dirt",

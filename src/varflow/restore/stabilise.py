@@ -46,7 +46,8 @@ from .._validate import check_field
 from ..registry import REPAIR
 from .denoise import _as_clip, _to_dtype
 
-__all__ = ["MODELS", "StabiliseParams", "fit_global_motion", "smooth_path", "stabilise"]
+__all__ = ["MODELS", "StabiliseParams", "fit_global_motion", "pair_flows", "smooth_path",
+           "stabilise"]
 
 log = logging.getLogger(__name__)
 
@@ -508,6 +509,32 @@ def _grey_for_flow(frame: np.ndarray, blur: float) -> np.ndarray:
     if blur > 0:
         z = cv2.GaussianBlur(z, (0, 0), sigmaX=blur, borderType=cv2.BORDER_REFLECT)
     return np.clip(np.float32(0.5) + np.float32(0.15) * z, 0.0, 1.0).astype(np.float32)
+
+
+def pair_flows(frame0: np.ndarray, frame1: np.ndarray, params: StabiliseParams
+               ) -> tuple[np.ndarray, np.ndarray] | np.ndarray:
+    """The flows of one pair of consecutive frames as :func:`stabilise` estimates them
+    (forward and backward, or forward only without ``fb_check``), to be passed back
+    as its ``flows`` by a caller that sees each pair in several windows.
+
+    Parameters
+    ----------
+    frame0, frame1 : ndarray, shape (H, W, C), float32
+    params : StabiliseParams
+
+    Returns
+    -------
+    ndarray or (ndarray, ndarray), shape (H', W', 2) each
+        On the reduced grid of ``flow_max_pixels``.
+    """
+    from .. import flow as _flow
+
+    a = _grey_for_flow(frame0, params.flow_blur)
+    b = _grey_for_flow(frame1, params.flow_blur)
+    fw = _flow(a, b, params.flow_method, max_pixels=params.flow_max_pixels)
+    if not params.fb_check:
+        return fw
+    return fw, _flow(b, a, params.flow_method, max_pixels=params.flow_max_pixels)
 
 
 def _texture(grey: np.ndarray) -> np.ndarray:
