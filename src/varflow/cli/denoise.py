@@ -59,7 +59,7 @@ from ._common import (
     rate_arg,
 )
 
-__all__ = ["add_parser", "sigma_arg"]
+__all__ = ["add_parser", "add_stream_flags", "sigma_arg"]
 
 log = logging.getLogger("varflow.cli")
 
@@ -102,6 +102,22 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.add_argument("--sigma", type=sigma_arg, metavar="S", help=SIGMA_HELP)
     p.add_argument("--method", default=RESTORE.default, metavar="NAME",
                    help=f"the method (default {RESTORE.default}; list below)")
+    add_stream_flags(p)
+    p.add_argument("--no-scene-cuts", dest="scene_cuts", action="store_false",
+                   help="search patches across scene cuts too (one scene)")
+    p.add_argument("--chunk", type=int_at_least(1), default=None, metavar="K",
+                   help="frames denoised together: more uses the cores better and holds "
+                   "more frames (default: the denoiser's)")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar, no compile notice")
+    _add_param_flags(p, _collect_params(RESTORE), RESTORE, chosen_methods(argv, RESTORE))
+    p.set_defaults(func=_cmd_denoise)
+
+
+def add_stream_flags(p: argparse.ArgumentParser) -> None:
+    """``--start``, ``--stop``, ``--input-fps``, ``--codec``, ``--quality`` and
+    ``--no-audio``: the section, rate and encoding of a streamed video job (shared with
+    ``varflow restore``)."""
     p.add_argument("--start", type=int_at_least(0), default=0, metavar="N",
                    help="first frame (default 0)")
     p.add_argument("--stop", type=int_at_least(0), default=None, metavar="N",
@@ -116,15 +132,6 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                    help="encoder quality (CRF for libx264; lower is better); not lossless")
     p.add_argument("--no-audio", dest="audio", action="store_false",
                    help="leave the audio of a video input out")
-    p.add_argument("--no-scene-cuts", dest="scene_cuts", action="store_false",
-                   help="search patches across scene cuts too (one scene)")
-    p.add_argument("--chunk", type=int_at_least(1), default=None, metavar="K",
-                   help="frames denoised together: more uses the cores better and holds "
-                   "more frames (default: the denoiser's)")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar, no compile notice")
-    _add_param_flags(p, _collect_params(RESTORE), RESTORE, chosen_methods(argv, RESTORE))
-    p.set_defaults(func=_cmd_denoise)
 
 
 def resolve(args: argparse.Namespace) -> tuple[Any, Any]:

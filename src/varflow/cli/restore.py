@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..evaluation.bench.common import parse_value
 from ..registry import REPAIR, RESTORE
 from ._common import (
     _claim,
@@ -38,9 +39,8 @@ from ._common import (
     _compile_notice,
     _Progress,
     int_at_least,
-    rate_arg,
 )
-from .denoise import SIGMA_HELP, sigma_arg
+from .denoise import SIGMA_HELP, add_stream_flags, sigma_arg
 
 __all__ = ["add_chain_flags", "add_parser", "parse_settings", "resolve_chain", "summary_line"]
 
@@ -86,20 +86,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
     p.add_argument("--mask-video", metavar="MASK",
                    help="also write the dirt stage's mask (white: replaced) as a video "
                    "or a folder of PNG frames")
-    p.add_argument("--start", type=int_at_least(0), default=0, metavar="N",
-                   help="first frame (default 0)")
-    p.add_argument("--stop", type=int_at_least(0), default=None, metavar="N",
-                   help="end frame, exclusive (default: the end of the input)")
-    p.add_argument("--input-fps", type=rate_arg, metavar="R",
-                   help="input frame rate, also the output's (default: the video's own; 25 "
-                   "for a folder)")
-    p.add_argument("--codec", metavar="C",
-                   help="FFmpeg encoder of a video output (default: lossless, after the "
-                   "extension)")
-    p.add_argument("--quality", type=int_at_least(0), metavar="Q",
-                   help="encoder quality (CRF for libx264; lower is better); not lossless")
-    p.add_argument("--no-audio", dest="audio", action="store_false",
-                   help="leave the audio of a video input out")
+    add_stream_flags(p)
     p.add_argument("--no-scene-cuts", dest="scene_cuts", action="store_false",
                    help="one scene: stages look across scene cuts too")
     p.add_argument("--chunk", type=int_at_least(1), default=None, metavar="K",
@@ -133,28 +120,6 @@ def resolve_chain(args: argparse.Namespace) -> Any:
     return ChainParams.resolve(stages, params, args.denoise_method)
 
 
-def _value(text: str, default: Any, flag: str) -> Any:
-    """``text`` as the type of the field's ``default``."""
-    if isinstance(default, bool):
-        low = text.strip().lower()
-        if low in ("1", "true", "yes", "on"):
-            return True
-        if low in ("0", "false", "no", "off"):
-            return False
-        raise ValueError(f"--set {flag}: expected true or false, got {text!r}")
-    if isinstance(default, int):
-        try:
-            return int(text)
-        except ValueError:
-            raise ValueError(f"--set {flag}: expected an integer, got {text!r}") from None
-    if isinstance(default, float):
-        try:
-            return float(text)
-        except ValueError:
-            raise ValueError(f"--set {flag}: expected a number, got {text!r}") from None
-    return text
-
-
 def parse_settings(settings: Sequence[str], stages: Sequence[str],
                    denoise_method: str) -> dict[str, dict[str, Any]]:
     """``{stage: {field: value}}`` from ``--set STAGE.FIELD=VALUE`` strings.
@@ -180,7 +145,7 @@ def parse_settings(settings: Sequence[str], stages: Sequence[str],
         if name not in fields:
             raise ValueError(f"--set {key}: not a parameter of {stage} (see 'varflow "
                              f"methods {method}')")
-        out.setdefault(stage, {})[name] = _value(value, fields[name], key)
+        out.setdefault(stage, {})[name] = parse_value(value, fields[name], f"--set {key}")
     return out
 
 

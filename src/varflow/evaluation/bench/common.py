@@ -17,15 +17,16 @@ import numpy as np
 
 from ...registry import METHODS
 
-__all__ = ["CSV_FIELDS", "markdown_table", "method_spec", "spec_name", "split_overrides",
-           "write_csv"]
+__all__ = ["CSV_FIELDS", "markdown_table", "method_spec", "parse_value", "spec_name",
+           "split_overrides", "write_csv"]
 
 #: Default leading columns of :func:`write_csv` (those of the Middlebury runner's rows).
 CSV_FIELDS = ("sequence", "method", "aee", "aae", "seconds", "book_tv_aee", "book_aee")
 
 
-def _parse_value(text: str, default: Any, field: str) -> Any:
-    """A field value written in a method spec, of the type of the field's default."""
+def parse_value(text: str, default: Any, field: str) -> Any:
+    """A field value written as text (a method spec, ``--set``), of the type of the
+    field's default; ``ValueError`` naming ``field`` otherwise."""
     if isinstance(default, bool):
         low = text.strip().lower()
         if low in ("1", "true", "yes", "on"):
@@ -33,12 +34,12 @@ def _parse_value(text: str, default: Any, field: str) -> Any:
         if low in ("0", "false", "no", "off"):
             return False
         raise ValueError(f"{field}: expected true or false, got {text!r}")
-    for kind in (int, float):
+    for kind, what in ((int, "an integer"), (float, "a number")):
         if isinstance(default, kind):
             try:
                 return kind(text)
             except ValueError:
-                raise ValueError(f"{field}: expected {kind.__name__}, got {text!r}") from None
+                raise ValueError(f"{field}: expected {what}, got {text!r}") from None
     return text
 
 
@@ -72,7 +73,7 @@ def method_spec(spec: str, registry: Mapping[str, Any] = METHODS) -> tuple[str, 
     for key, value in given.items():
         if key not in defaults:
             raise ValueError(f"{key}: not a parameter of method {name!r} (in {spec!r})")
-        out[key] = _parse_value(value, defaults[key], key)
+        out[key] = parse_value(value, defaults[key], key)
     return name, out
 
 
