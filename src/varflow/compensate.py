@@ -214,6 +214,10 @@ def consistency(flow_fw: np.ndarray, flow_bw: np.ndarray, *, alpha1: float = 0.0
     a2 = _weight(alpha2, "alpha2")
     back, inside = warp_bilinear(bw, fw)
     with np.errstate(invalid="ignore", over="ignore"):
-        err = np.square(fw + back).sum(axis=-1)
-        limit = a1 * (np.square(fw).sum(axis=-1) + np.square(back).sum(axis=-1)) + a2
+        # the two components added explicitly: a reduction over a length-2 axis is
+        # several times slower than the adds, with the same result
+        loop = fw + back
+        err = np.square(loop[..., 0]) + np.square(loop[..., 1])
+        limit = a1 * (np.square(fw[..., 0]) + np.square(fw[..., 1])
+                      + (np.square(back[..., 0]) + np.square(back[..., 1]))) + a2
         return inside & (err < limit)  # NaN compares False
