@@ -183,3 +183,31 @@ def test_pair_flows_are_estimated_once_per_pair() -> None:
     # the windows' own flicker-noise estimates move the smoothed brightness a little:
     # measured mean 0.13 grey levels (2.6 on the first frame, 0.05 in the middle)
     assert diff.mean() < 0.4, diff.mean()
+
+
+def test_dirt_starts_from_the_deflicker_flows(monkeypatch) -> None:
+    """After deflicker (which moves no pixel) the dirt stage takes its first flows
+    from the frames: each consecutive pair is estimated twice by deflicker (both ways)
+    and the dirt stage estimates only its refined flows; the blotches are found."""
+    clean = _clip()
+    dirty, truth = _blotches(clean)
+    calls: list[int] = []
+    original = varflow.flow
+
+    def counted(*args: object, **kwargs: object) -> np.ndarray:
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(varflow, "flow", counted)
+    out, mask = varflow.restore_clip(dirty, ["deflicker", "dirt"], return_mask=True)
+    # deflicker: 9 pairs both ways; dirt: its refined flows of 18 + 4 pairs
+    assert len(calls) == 18 + 22, len(calls)
+    inner = ndimage.binary_erosion(truth, np.ones((1, 3, 3), bool))
+    assert mask[inner].all()
+    assert (mask & ~ndimage.binary_dilation(truth, np.ones((1, 7, 7), bool))).sum() == 0
+    calls.clear()
+    varflow.restore_clip(dirty, ["stabilise", "dirt"])  # stabilise moves pixels: its
+    n_stab = len(calls)                                  # flows are not passed on
+    calls.clear()
+    varflow.restore_clip(dirty, ["stabilise"])
+    assert n_stab - len(calls) == 44

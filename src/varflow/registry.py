@@ -246,12 +246,21 @@ class Repairer(Entry):
         ``(F, H, W)`` bool mask of the pixels the stage replaced (None for a stage
         that changes every pixel); ``callback(done, total)`` reports progress;
         ``stats`` (a dict) gains timings; ``flows`` the stage's own flows between
-        consecutive frames (``pair_flows``' results stacked along a first axis).
+        consecutive frames (``pair_flows``' results stacked along a first axis), or
+        for a stage without ``pair_flows`` an earlier stage's ``(fwd, bwd)`` (see
+        ``pair_flows``), or None.
     pair_flows : callable or None
         ``pair_flows(frame0, frame1, params)`` -> an array or a tuple of arrays: the
         flows of one consecutive pair as the stage estimates them, so that a stream
         repaired in overlapping windows estimates each pair once; None: the stage
-        takes no flows from outside.
+        takes no flows of its own from outside (its ``run`` may then be given, as
+        ``flows``, the ``(fwd, bwd)`` an earlier stage that ``shares_flows`` left:
+        flows to start from).
+    shares_flows : bool
+        The stage changes intensities, not positions, so the forward and backward
+        flows of its ``pair_flows`` (the first two of its arrays) still hold for its
+        output and a later stage without ``pair_flows`` of its own may start from
+        them.  Default False.
     order : int
         Its place in the chain of :func:`varflow.restore.chain.iter_restore`, as
         restoration practice orders the stages: geometry first (the later stages
@@ -266,6 +275,7 @@ class Repairer(Entry):
     order: int = 0
     context: Callable[[Any], int] | None = None
     pair_flows: Callable[..., Any] | None = None
+    shares_flows: bool = False
 
 
 class Registry(MutableMapping):

@@ -692,7 +692,8 @@ def mean_std_match(degraded: np.ndarray) -> np.ndarray:
 def varflow_chain(degraded: np.ndarray, sigma: float | None = NOISE_SIGMA
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """varflow's stages in the order of restoration practice: stabilise, deflicker,
-    remove_dirt, denoise.
+    remove_dirt, denoise; the last three as ``varflow restore`` runs them
+    (:func:`varflow.restore_clip`: the dirt stage starts from deflicker's flows).
 
     Parameters
     ----------
@@ -713,9 +714,8 @@ def varflow_chain(degraded: np.ndarray, sigma: float | None = NOISE_SIGMA
     import varflow
 
     steady, transforms = varflow.stabilise(degraded, return_transforms=True)
-    even = varflow.deflicker(steady)
-    clean, mask = varflow.remove_dirt(even, return_mask=True)
-    out = varflow.denoise(clean, sigma)
+    out, mask = varflow.restore_clip(steady, ["deflicker", "dirt", "denoise"], sigma=sigma,
+                                     return_mask=True)
     return np.asarray(out, np.float32), mask, transforms
 
 

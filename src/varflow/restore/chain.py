@@ -14,7 +14,9 @@ each side for ``dirt``), so a frame comes out as the whole scene's run would giv
 and memory holds a few windows.  A stage that takes its flows from outside
 (``pair_flows`` of its entry: ``stabilise``, ``deflicker``) gets each consecutive
 pair's flows estimated once and kept while the pair is in a window, so the overlap
-costs no flow twice.  The denoiser is the streaming
+costs no flow twice; ``deflicker`` changes no positions, so its flows go on with the
+frames and the ``dirt`` stage starts from them (its first estimate; the final flows
+it estimates again on the frames with the rough detection filled).  The denoiser is the streaming
 :func:`~varflow.restore.denoise.iter_denoise`.  No stage looks across a scene cut.
 
 Values: integer frames are repaired as float32 on the 0-255 scale (uint16 divided by
@@ -56,6 +58,9 @@ class _Item:
     frame: np.ndarray          # (H, W, C) float32, work scale
     cut: bool                  # a scene cut lies before it
     mask: np.ndarray | None    # (H, W) bool: the pixels the dirt stage replaced
+    # (fwd, bwd) (H, W, 2) each to the next frame of the scene, estimated by a stage
+    # that changes no positions (Repairer.shares_flows), for the next stage to start from
+    pair: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def resolve_stages(stages: Iterable[str] | None = None, params: Mapping[str, Any] | None = None,
@@ -161,9 +166,15 @@ def _windowed(items: Iterator[_Item], name: str, entry: Any, params: Any, chunk:
     cache: dict[int, Any] = {}  # the pair flows from scene frame k to k + 1
 
     def flows(lo: int, hi: int) -> Any:
-        """The stage's flows of the window buf[lo:hi], each pair estimated once."""
-        if entry.pair_flows is None or hi - lo < 2:
+        """The stage's flows of the window buf[lo:hi], each pair estimated once; for
+        a stage without flows of its own, the (fwd, bwd) the frames carry, if all do."""
+        if hi - lo < 2:
             return None
+        if entry.pair_flows is None:
+            carried = [buf[k].pair for k in range(lo, hi - 1)]
+            if any(c is None for c in carried):
+                return None
+            return tuple(np.stack(parts) for parts in zip(*carried, strict=True))
         for k in range(lo, hi - 1):
             if base + k not in cache:
                 cache[base + k] = entry.pair_flows(buf[k].frame, buf[k + 1].frame, params)
@@ -183,7 +194,9 @@ def _windowed(items: Iterator[_Item], name: str, entry: Any, params: Any, chunk:
             it = buf[k]
             m = it.mask if mask is None else (mask[k - lo] if it.mask is None
                                              else mask[k - lo] | it.mask)
-            yield _Item(np.asarray(out[k - lo], np.float32), it.cut, m)
+            pair = cache.get(base + k) if entry.shares_flows and k + 1 < hi else None
+            yield _Item(np.asarray(out[k - lo], np.float32), it.cut, m,
+                        None if pair is None else (pair[0], pair[1]))
 
     for it in items:
         if it.cut:

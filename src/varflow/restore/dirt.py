@@ -437,6 +437,7 @@ def _fill_clip(work: np.ndarray, mask: np.ndarray, fl: Flows, p: DirtParams,
 
 def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: bool = False,
                 flows: tuple[np.ndarray, np.ndarray] | None = None,
+                initial_flows: tuple[np.ndarray, np.ndarray] | None = None,
                 callback: Callback | None = None, stats: dict | None = None,
                 **overrides: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Remove dust, dirt and hairs (blotches present on one frame only) from a clip.
@@ -476,6 +477,11 @@ def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: b
         estimating them (``refine`` then repeats the detection without estimating
         the flows again); the flows across two or three frames are composed from
         them.
+    initial_flows : (ndarray, ndarray), optional
+        The same form, in place of the first estimate only: the rough detection
+        uses them and ``refine`` still estimates the flows again on the frames with
+        the rough detection filled (the chain passes the flows of its deflicker
+        stage, which changes no positions).  Not with ``flows``.
     callback : callable, optional
         ``callback(done, total)`` as the work progresses.
     stats : dict, optional
@@ -520,12 +526,19 @@ def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: b
     clip, back = _as_clip(frames)
     t0 = time.perf_counter()
     n, h, w, _ = clip.shape
-    if flows is not None:
-        fwd, bwd = (np.asarray(f, np.float32) for f in flows)
+    if flows is not None and initial_flows is not None:
+        raise ValueError("initial_flows: not with flows (which replace every estimate)")
+    given, given_name = (flows, "flows") if initial_flows is None else (initial_flows,
+                                                                        "initial_flows")
+    if given is not None:
+        try:
+            fwd, bwd = (np.asarray(f, np.float32) for f in given)
+        except (TypeError, ValueError):
+            raise ValueError(f"{given_name}: expected (fwd, bwd)") from None
         want = (max(n - 1, 0), h, w, 2)
         for name, f in (("fwd", fwd), ("bwd", bwd)):
             if f.shape != want:
-                raise ValueError(f"flows: {name} of shape {f.shape}, expected {want}")
+                raise ValueError(f"{given_name}: {name} of shape {f.shape}, expected {want}")
     if n < 3:
         mask = np.zeros((n, h, w), bool)
         log.warning("remove_dirt: %d frame(s); at least 3 are needed, nothing done", n)
@@ -536,7 +549,8 @@ def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: b
 
     pairs = _pairs(n)
     passes = 1 + p.refine
-    total = (len(pairs) * passes if flows is None else 0) + n * passes
+    estimated = 0 if flows is not None else passes - (initial_flows is not None)
+    total = len(pairs) * estimated + n * passes
     done = [0]
 
     def tick() -> None:
@@ -564,7 +578,7 @@ def remove_dirt(frames: Any, params: DirtParams | None = None, *, return_mask: b
         flow_seconds += time.perf_counter() - s0
         return out_
 
-    if flows is None:
+    if given is None:
         fl = estimate(work)
     else:
         fl = {}

@@ -310,11 +310,12 @@ def _compute_flows(clip: np.ndarray, p: DeflickerParams, lo: float, hi: float,
 
 
 def pair_flows(frame0: np.ndarray, frame1: np.ndarray, params: DeflickerParams
-               ) -> tuple[np.ndarray, None, np.ndarray, None]:
-    """The forward flow of one pair of consecutive frames and its forward-backward
-    mask, as :func:`deflicker` estimates them (on the pair's own intensity range, which
-    the high-pass normalisation of the flow frames makes irrelevant), to be passed
-    back, stacked, as its ``flows`` by a caller that sees each pair in several windows.
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, None]:
+    """The flows of one pair of consecutive frames and the forward one's
+    forward-backward mask, as :func:`deflicker` estimates them (on the pair's own
+    intensity range, which the high-pass normalisation of the flow frames makes
+    irrelevant), to be passed back, stacked, as its ``flows`` by a caller that sees
+    each pair in several windows.
 
     Parameters
     ----------
@@ -323,9 +324,11 @@ def pair_flows(frame0: np.ndarray, frame1: np.ndarray, params: DeflickerParams
 
     Returns
     -------
-    (fwd, None, fwd_ok, None)
-        ``fwd`` ``(H, W, 2)`` float32 and ``fwd_ok`` ``(H, W)`` bool, in the form of
-        :func:`deflicker`'s ``flows`` (the backward parts are not needed).
+    (fwd, bwd, fwd_ok, None)
+        ``fwd`` and ``bwd`` ``(H, W, 2)`` float32 (frame 0 to 1 and 1 to 0) and
+        ``fwd_ok`` ``(H, W)`` bool, in the form of :func:`deflicker`'s ``flows``
+        (which uses the forward ones; deflicker changes no positions, so the pair
+        still serves a later stage, e.g. as the dirt stage's first flows).
     """
     from .. import flow as _flow
     from ..compensate import consistency
@@ -339,8 +342,8 @@ def pair_flows(frame0: np.ndarray, frame1: np.ndarray, params: DeflickerParams
     a, b = _flow_frames(pair, lo, hi, params.flow_blur, params.flow_highpass)
     kw: dict[str, Any] = dict(params=params.flow_params, max_pixels=params.flow_max_pixels)
     fwd = _flow(a, b, params.flow_method, **kw)
-    ok = consistency(fwd, _flow(b, a, params.flow_method, **kw), alpha2=params.fb_tolerance)
-    return fwd, None, ok, None
+    bwd = _flow(b, a, params.flow_method, **kw)
+    return fwd, bwd, consistency(fwd, bwd, alpha2=params.fb_tolerance), None
 
 
 def _given_flows(flows: Any, n: int, h: int, w: int,

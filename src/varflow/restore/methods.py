@@ -268,9 +268,12 @@ def _run_dirt(clip: Any, params: Any, callback: Any = None, stats: Any = None,
               flows: Any = None) -> Any:
     from .dirt import remove_dirt
 
-    # its flows are estimated again after a rough fill of the dirt (refine): a window's
-    # own run, not pair flows from outside
-    return remove_dirt(clip, params, return_mask=True, callback=callback, stats=stats)
+    # flows an earlier stage estimated (deflicker's) replace only the first estimate:
+    # the final ones are estimated again after a rough fill of the dirt (refine); with
+    # no refinement the stage's own flow settings are kept
+    initial = flows if flows is not None and params.refine > 0 else None
+    return remove_dirt(clip, params, return_mask=True, initial_flows=initial,
+                       callback=callback, stats=stats)
 
 
 def _stabilise_pair_flows(frame0: Any, frame1: Any, params: Any) -> Any:
@@ -324,6 +327,7 @@ REPAIR.register(Repairer(
     order=1,
     context=_deflicker_context,
     pair_flows=_deflicker_pair_flows,
+    shares_flows=True,
 ))
 REPAIR.register(Repairer(
     name="dirt",
