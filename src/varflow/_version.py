@@ -5,4 +5,4 @@ arithmetic): :mod:`varflow.batch` refuses to resume an output folder made by
 another version, so a folder never mixes the results of two versions.
 """
 
-__version__ = "0.9.0"
+__version__ = "0.9.1"

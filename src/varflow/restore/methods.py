@@ -64,7 +64,7 @@ class NLBayesParams(FlowComposed):
         ``2 σ²`` apart on average): a texture unlike its surroundings is averaged
         with its own copies along the motion only, not with look-alikes; 0 keeps
         all ``n_similar``.  Groups of fewer patches than values are estimated in
-        their Gram matrix.  Default 4.
+        their Gram matrix.  Default 8.
     tau_final : float
         The same in the final pass, on the first estimate (whose copies of one
         patch are much closer than ``2 σ²``); it binds at low noise only, where
@@ -111,7 +111,7 @@ class NLBayesParams(FlowComposed):
     n_similar_final: int = 90
     search: int = 7
     search_t: int = 4
-    tau: float = 4.0
+    tau: float = 8.0
     tau_final: float = 8.0
     stride: int = 3
     beta: float = 1.0
