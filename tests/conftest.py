@@ -1,4 +1,5 @@
-"""Shared fixtures: the location of the benchmark data, one Numba thread."""
+"""Shared fixtures: the location of the benchmark data, one Numba thread, a count of
+:func:`varflow.flow` calls."""
 
 from __future__ import annotations
 
@@ -27,6 +28,24 @@ def one_numba_thread() -> Iterator[None]:
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(old)
+
+
+@pytest.fixture
+def flow_calls(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """A list that gains an entry at every call of :func:`varflow.flow` during the test
+    (the library calls it through the package attribute, so the wrapper sees them all);
+    ``len()`` is the count, ``clear()`` starts it again."""
+    import varflow
+
+    calls: list[int] = []
+    original = varflow.flow
+
+    def counted(*args: object, **kwargs: object) -> object:
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(varflow, "flow", counted)
+    return calls
 
 
 @pytest.fixture(scope="session")

@@ -185,20 +185,13 @@ def test_pair_flows_are_estimated_once_per_pair() -> None:
     assert diff.mean() < 0.4, diff.mean()
 
 
-def test_dirt_starts_from_the_deflicker_flows(monkeypatch) -> None:
+def test_dirt_starts_from_the_deflicker_flows(flow_calls: list[int]) -> None:
     """After deflicker (which moves no pixel) the dirt stage takes its first flows
     from the frames: each consecutive pair is estimated twice by deflicker (both ways)
     and the dirt stage estimates only its refined flows; the blotches are found."""
     clean = _clip()
     dirty, truth = _blotches(clean)
-    calls: list[int] = []
-    original = varflow.flow
-
-    def counted(*args: object, **kwargs: object) -> np.ndarray:
-        calls.append(1)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(varflow, "flow", counted)
+    calls = flow_calls
     out, mask = varflow.restore_clip(dirty, ["deflicker", "dirt"], return_mask=True)
     # deflicker: 9 pairs both ways; dirt: its refined flows of 18 + 4 pairs
     assert len(calls) == 18 + 22, len(calls)
