@@ -317,6 +317,21 @@ def _sift_down(hd, hs, hf, hy, hx, size):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def _heap_sort(hd, hs, hf, hy, hx, size):  # pragma: no cover - numba
+    """Sort the max-heap of ``size`` entries in place into increasing (distance,
+    sequence) order: the root (the largest) goes to the end, the rest is sifted down.
+    O(size log size); an insertion sort of the heap's near-decreasing array is
+    quadratic."""
+    for end in range(size - 1, 0, -1):
+        hd[0], hd[end] = hd[end], hd[0]
+        hs[0], hs[end] = hs[end], hs[0]
+        hf[0], hf[end] = hf[end], hf[0]
+        hy[0], hy[end] = hy[end], hy[0]
+        hx[0], hx[end] = hx[end], hx[0]
+        _sift_down(hd, hs, hf, hy, hx, end)
+
+
+@njit(cache=True)
 def _push(hd, hs, hf, hy, hx, size, cap, dist, seq, f, y, x):  # pragma: no cover - numba
     """Offer a candidate to the max-heap of the ``cap`` nearest; return the new size.
     Candidates come in increasing ``seq``, so a tie with the worst kept one loses."""
@@ -431,16 +446,7 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
                                              seq, f, yy, xx)
             m = size
             if tau > 0:  # only the candidates within tau of the reference, nearest first
-                for i in range(1, m):  # insertion sort by (distance, sequence)
-                    j = i
-                    while j > 0 and (hd[j - 1] > hd[j] or (hd[j - 1] == hd[j]
-                                                           and hs[j - 1] > hs[j])):
-                        hd[j - 1], hd[j] = hd[j], hd[j - 1]
-                        hs[j - 1], hs[j] = hs[j], hs[j - 1]
-                        hf[j - 1], hf[j] = hf[j], hf[j - 1]
-                        hy[j - 1], hy[j] = hy[j], hy[j - 1]
-                        hx[j - 1], hx[j] = hx[j], hx[j - 1]
-                        j -= 1
+                _heap_sort(hd, hs, hf, hy, hx, m)
                 limit = tau * sigma2 * d * dist_channels
                 kept = 0
                 while kept < m and hd[kept] <= limit:
