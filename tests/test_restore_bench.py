@@ -126,19 +126,19 @@ def _fourier_shifted(base: np.ndarray, shifts: np.ndarray) -> np.ndarray:
 
 def test_weave_agreement_of_known_shifts() -> None:
     rng = np.random.default_rng(4)
-    base = cv2.GaussianBlur(rng.uniform(0, 255, (96, 128)), (0, 0), 1.0)
+    base = cv2.GaussianBlur(rng.uniform(0, 255, (160, 192)), (0, 0), 1.0)
     clean = np.repeat(base[None], 8, axis=0)
     planted = rng.uniform(-4, 4, size=(8, 2))
     woven = _fourier_shifted(base, planted)
-    # sub-pixel shifts found within 0.05 px (measured 0.014)
-    assert np.abs(rs.frame_shifts(clean, woven) - planted).max() < 0.05
+    # sub-pixel shifts found within 0.06 px (measured 0.022)
+    assert np.abs(rs.frame_shifts(clean, woven) - planted).max() < 0.06
     second = planted[2:] - 2 * planted[1:-1] + planted[:-2]
     exact = math.sqrt(np.mean(np.sum(second ** 2, axis=1)))
     assert exact > 5.0  # ±4 px independent shifts: about 8 px
-    assert rs.weave_agreement(woven, clean) == pytest.approx(exact, abs=0.1)
+    assert rs.weave_agreement(woven, clean) == pytest.approx(exact, abs=0.15)  # -0.054
     # a smooth drift between the two clips is not jitter; identical clips agree
     drift = _fourier_shifted(base, np.array([[0.5 * t, 0.3 * t] for t in range(8)]))
-    assert rs.weave_agreement(drift, clean) < 0.05
+    assert rs.weave_agreement(drift, clean) < 0.05  # measured 0.014
     assert rs.weave_agreement(clean, clean) == 0.0
     with pytest.raises(ValueError, match="3 frames"):
         rs.weave_agreement(woven[:2], clean[:2])
@@ -257,12 +257,12 @@ def test_weave_case_on_an_alley_crop(data_root: Path, one_numba_thread) -> None:
     rows = rs.run_restore_benchmark(data_root, "alley_1", "weave", 6, crop=(128, 192))
     by = {r["method"]: r for r in rows}
     assert list(by) == ["degraded", "stabilise", "deshake"]
-    # the woven clip against the clean one: the weave itself (measured 7.0 px);
-    # stabilise's outputs on both clips agree within a pixel (measured 0.59 px on
-    # this small crop), deshake's do not (4.56 px)
+    # the woven clip against the clean one: the weave itself (measured 7.1 px);
+    # stabilise's outputs on both clips agree (measured 0.11 px on this small crop),
+    # deshake's do not (4.5 px)
     assert by["degraded"]["weave_agreement"] > 5.0
-    assert by["stabilise"]["weave_agreement"] < 1.2
-    assert by["deshake"]["weave_agreement"] > 2 * by["stabilise"]["weave_agreement"]
+    assert by["stabilise"]["weave_agreement"] < 0.3
+    assert by["deshake"]["weave_agreement"] > 5 * by["stabilise"]["weave_agreement"]
     assert by["stabilise"]["jitter"] < by["degraded"]["jitter"]
 
 
