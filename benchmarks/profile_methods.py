@@ -20,7 +20,7 @@ run that compiles every kernel:
   written if the call changed it (found by comparing a copy on the kernel's first
   call with these argument shapes), each returned array as written, all of it times
   the kernel's passes over memory (its iteration count for the iterative solvers,
-  below); then GB/s and the share of the copy bandwidth measured in the same run
+  below; scratch arrays a kernel allocates inside are not counted); then GB/s and the share of the copy bandwidth measured in the same run
   (``numpy.copyto`` and a parallel Numba copy of a 256 MiB float32 array, the faster
   of the two, two bytes counted per byte copied).
 
