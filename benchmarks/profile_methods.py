@@ -17,12 +17,14 @@ run that compiles every kernel:
 - the **kernel table** (a roofline against memory bandwidth): every Numba kernel
   called from Python — calls, seconds, share of the wall time, and the bytes it
   moves, counted from its arrays: each array argument once as read, once more as
-  written if the call changed it (found by comparing a copy on the kernel's first
-  call with these argument shapes), each returned array as written, all of it times
-  the kernel's passes over memory (its iteration count for the iterative solvers,
-  below; scratch arrays a kernel allocates inside are not counted); then GB/s and the share of the copy bandwidth measured in the same run
-  (``numpy.copyto`` and a parallel Numba copy of a 256 MiB float32 array, the faster
-  of the two, two bytes counted per byte copied).
+  written if the call changed it (found in an untimed run of the same case before
+  the timed one, by comparing a copy of the arguments on the kernel's first call
+  with those shapes), each returned array as written, all of it times the kernel's
+  passes over memory (its iteration count for the iterative solvers, below; scratch
+  arrays a kernel allocates inside are not counted); then GB/s and the share of the
+  copy bandwidth measured in the same run (``numpy.copyto`` and a parallel Numba copy
+  of a 256 MiB float32 array, the faster of the two, two bytes counted per byte
+  copied).
 
 A kernel far below the copy bandwidth is bound by arithmetic or latency (or by a
 small working set: arrays that fit in cache can exceed it). Time it on an otherwise
@@ -116,7 +118,9 @@ class Recorder:
         self.kernel_calls: dict[str, int] = collections.defaultdict(int)
         self.kernel_bytes: dict[str, float] = collections.defaultdict(float)
         self.written: dict[tuple, tuple[bool, ...]] = {}
-        self.active = False
+        self.active = False  # timing and counting
+        self.learning = False  # finding which arguments each kernel writes
+        self.unlearned = 0  # timed calls whose writes were not learnt (counted as reads)
 
     def clear(self) -> None:
         for d in (self.stage_s, self.kernel_s, self.kernel_calls, self.kernel_bytes):
@@ -163,20 +167,25 @@ def install_kernel_timer(rec: Recorder) -> Callable[[], None]:
     original = CPUDispatcher.__call__
 
     def timed(self: Any, *args: Any, **kwargs: Any) -> Any:
-        if not rec.active:
+        if not (rec.active or rec.learning):
             return original(self, *args, **kwargs)
         name = self.py_func.__name__
         arrays = _arrays((*args, *kwargs.values()))
         key = (self.py_func.__module__, name, tuple((a.shape, a.dtype.str) for a in arrays))
-        copies = None
-        if key not in rec.written:
+        if rec.learning:
+            if key in rec.written:
+                return original(self, *args, **kwargs)
             copies = [a.copy() for a in arrays]
+            result = original(self, *args, **kwargs)
+            rec.written[key] = tuple(_changed(c, a) for c, a in zip(copies, arrays, strict=True))
+            return result
         t0 = time.perf_counter()
         result = original(self, *args, **kwargs)
         dt = time.perf_counter() - t0
-        if copies is not None:
-            rec.written[key] = tuple(_changed(c, a) for c, a in zip(copies, arrays, strict=True))
-        flags = rec.written[key]
+        flags = rec.written.get(key)
+        if flags is None:
+            rec.unlearned += 1
+            flags = (False,) * len(arrays)
         moved = sum(a.nbytes * (2 if w else 1) for a, w in zip(arrays, flags, strict=True))
         ids = {id(a) for a in arrays}
         moved += sum(r.nbytes for r in _arrays(result if isinstance(result, tuple)
@@ -294,16 +303,17 @@ def profile(method: str, root: Path, rlr_frames: int, copy_gbs: float, top: int)
     undo_kernels = install_kernel_timer(rec)
     try:
         warm()  # compiles every kernel the runs need (not timed)
-        rec.active = True
-        rec.clear()
         total = 0.0
         print(f"## {method}\n")
         print("| case | seconds |\n|---|---:|")
         for name, run in runs:
+            rec.learning = True  # an untimed run finds which arrays the kernels write
+            run()
+            rec.learning, rec.active = False, True
             dt = _seconds(run)
+            rec.active = False
             total += dt
             print(f"| {name} | {dt:.2f} |")
-        rec.active = False
     finally:
         undo_kernels()
         undo_stages()
@@ -327,6 +337,9 @@ def profile(method: str, root: Path, rlr_frames: int, copy_gbs: float, top: int)
           f"{others / total:.1%} | | | |")
     print(f"| outside every kernel (Python, NumPy, OpenCV) | | {total - inside:.2f} | "
           f"{(total - inside) / total:.1%} | | | |\n")
+    if rec.unlearned:
+        print(f"({rec.unlearned} kernel calls with argument shapes not seen in the untimed "
+              "run: their arrays counted as read only)\n")
 
 
 def main(argv: list[str] | None = None) -> int:

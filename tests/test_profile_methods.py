@@ -48,20 +48,27 @@ def test_kernel_bytes_counted_from_the_arrays(prof):
     rec = prof.Recorder()
     undo = prof.install_kernel_timer(rec)
     try:
-        rec.active = True
-        out[:] = 0.0  # a write is found by a change on the first call
+        rec.learning = True  # the untimed run: a write is found by a change
+        out[:] = 0.0
         _add_into(a, b, out)
-        _add_into(a, b, out)  # unchanged output the second time: written as learnt
         _twice(a)
         _sum_of(a)
+        rec.learning, rec.active = False, True
+        assert not rec.kernel_calls  # learning counts nothing
+        _add_into(a, b, out)
+        _add_into(a, b, out)  # unchanged output now: written, as learnt
+        _twice(a)
+        _sum_of(a)
+        _twice(np.ones(10, np.float32))  # a shape not learnt: its argument read only
         rec.active = False
         _twice(a)  # not counted when inactive
     finally:
         undo()
+    assert rec.unlearned == 1
     mod = _add_into.py_func.__module__.removeprefix("varflow.")
     assert rec.kernel_calls[f"{mod}._add_into"] == 2
     assert rec.kernel_bytes[f"{mod}._add_into"] == 2 * (4000 + 4000 + 2 * 4000)
-    assert rec.kernel_bytes[f"{mod}._twice"] == 4000 + 4000
+    assert rec.kernel_bytes[f"{mod}._twice"] == 4000 + 4000 + 40 + 40
     assert rec.kernel_calls[f"{mod}._sum_of"] == 1
     assert rec.kernel_bytes[f"{mod}._sum_of"] == 4000
     assert all(s > 0 for s in rec.kernel_s.values())
