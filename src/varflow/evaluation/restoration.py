@@ -96,7 +96,6 @@ __all__ = [
     "mean_std_match",
     "plant_case",
     "registration_jitter",
-
     "residual_flicker",
     "run_restore_benchmark",
     "score_restoration",
