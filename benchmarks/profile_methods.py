@@ -122,10 +122,6 @@ class Recorder:
         self.learning = False  # finding which arguments each kernel writes
         self.unlearned = 0  # timed calls whose writes were not learnt (counted as reads)
 
-    def clear(self) -> None:
-        for d in (self.stage_s, self.kernel_s, self.kernel_calls, self.kernel_bytes):
-            d.clear()
-
     def stage(self, label: str, func: Callable) -> Callable:
         @functools.wraps(func)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -141,7 +137,6 @@ class Recorder:
                 if self.stack:
                     self.stack[-1][1] += total
 
-        wrapper.__wrapped_stage__ = func  # type: ignore[attr-defined]
         return wrapper
 
 
