@@ -53,7 +53,7 @@ def test_group_estimate_matches_numpy_reference(m: int, oracle: bool) -> None:
     pilot = (signal + rng.normal(0, 5, (nc, d, m))).astype(np.float32)
     keep = np.ones(m, bool)
     out = np.zeros_like(group)
-    ws = np.zeros((d, d)), np.zeros((d, d)), np.zeros((2, d))
+    ws = nb.group_workspace(d, m)
     p = pilot if oracle else group[:, :, :0]
     nb.estimate_group(group, p, sigma2, 1.0, 0.0, keep, out, *ws)
     ref = nb.estimate_group_reference(group, pilot if oracle else None, sigma2, 1.0, 0.0)
@@ -74,7 +74,7 @@ def test_homogeneous_group_becomes_its_mean() -> None:
     rng = np.random.default_rng(0)
     group = (50 + rng.normal(0, 10, (1, 25, 40))).astype(np.float32)
     out = np.zeros_like(group)
-    ws = np.zeros((25, 25)), np.zeros((25, 25)), np.zeros((2, 25))
+    ws = nb.group_workspace(25, 40)
     nb.estimate_group(group, group[:, :, :0], 100.0, 1.0, 1.05, np.ones(40, bool), out, *ws)
     np.testing.assert_allclose(out, group.mean(), rtol=1e-5)
     ref = nb.estimate_group_reference(group, None, 100.0, 1.0, 1.05)
@@ -88,6 +88,28 @@ def test_band_height_keeps_phases_apart() -> None:
             # a band writes search rows above and search + patch - 1 below its own;
             # the next band of its phase starts two bands later
             assert band >= 2 * search + patch - 1
+
+
+@pytest.mark.parametrize("count, n", [(1, 60), (60, 60), (61, 60), (415, 60), (415, 90),
+                                      (415, 2), (300, 299)])
+def test_nearest_candidates_match_a_stable_sort(count: int, n: int) -> None:
+    """The group is the first n candidates in (distance, order found): NumPy's
+    lexicographic sort of the same keys, ties included."""
+    rng = np.random.default_rng(count + n)
+    cd = rng.integers(0, 40, count).astype(np.float64)  # many ties
+    cd[0] = -1.0
+    idx = np.empty(count, np.int64)
+    order = np.full(n, -1, np.int64)
+    got = nb._nearest(cd, idx, count, n, order)
+    want = np.lexsort((np.arange(count), cd))[:n]
+    assert got == len(want)
+    np.testing.assert_array_equal(order[:got], want)
+    # the quickselect alone: the k-th in place, every one before it comes first
+    for k in (0, count // 2, count - 1):
+        idx[:count] = np.arange(count)
+        nb._select(cd, idx, count, k)
+        assert idx[k] == np.lexsort((np.arange(count), cd))[k]
+        assert set(idx[:k]) == set(np.lexsort((np.arange(count), cd))[:k])
 
 
 # --------------------------------------------------------------------------- motion

@@ -44,7 +44,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["band_height", "denoise_pass", "estimate_group", "estimate_group_reference"]
+__all__ = ["band_height", "denoise_pass", "estimate_group", "estimate_group_reference",
+           "group_workspace"]
 
 
 def estimate_group_reference(group: np.ndarray, pilot: np.ndarray | None, sigma2: float,
@@ -81,8 +82,8 @@ _RIDGE = 1e-3
 
 
 @njit(cache=True)
-def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low,
-                   vec):  # pragma: no cover - numba
+def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low, vec,
+                   buf):  # pragma: no cover - numba
     """Empirical Wiener estimate of a group of patches, channel by channel.
 
     ``P̂ = P − β σ² C⁻¹ (P − μ)`` in the first pass (C the noisy group's covariance,
@@ -111,6 +112,8 @@ def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low,
         Workspace.
     vec : ndarray, shape (2, d), float64
         Workspace.
+    buf : ndarray, shape (>= 2 d m,), float64
+        Workspace (:func:`group_workspace` makes all four).
     """
     nc, d, m = group.shape
     if flat > 0:
@@ -149,27 +152,30 @@ def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low,
     for i in range(m):
         if keep[i]:
             nk += 1
-    xs = np.empty((d, m), np.float64)
-    zs = np.empty((d, nk), np.float64)
+    xs = buf[:d * m].reshape((d, m))  # the centred patches, one per column
+    zs = buf[d * m:d * m + d * nk].reshape((d, nk))
     for c in range(nc):
+        gc = group[c]  # (d, m)
+        oc = out[c]
         for j in range(d):
             s = 0.0
             for i in range(m):
-                s += group[c, j, i]
+                s += gc[j, i]
             mu[j] = s / m
         if oracle:
+            pc = pilot[c]
             for j in range(d):
                 s = 0.0
                 for i in range(m):
-                    s += pilot[c, j, i]
+                    s += pc[j, i]
                 s /= m
                 for i in range(m):
-                    xs[j, i] = pilot[c, j, i] - s
+                    xs[j, i] = pc[j, i] - s
         else:
             for j in range(d):
                 for i in range(m):
-                    xs[j, i] = group[c, j, i] - mu[j]
-        cov[:, :] = np.dot(xs, xs.T)
+                    xs[j, i] = gc[j, i] - mu[j]
+        np.dot(xs, xs.T, cov)
         ridge = sigma2 if oracle else _RIDGE * sigma2
         for j in range(d):
             cov[j, j] = cov[j, j] / (m - 1) + ridge
@@ -190,30 +196,34 @@ def estimate_group(group, pilot, sigma2, beta, flat, keep, out, cov, low,
             q = 0
             for i in range(m):
                 if keep[i]:
-                    zs[j, q] = group[c, j, i] - mu[j]
+                    zs[j, q] = gc[j, i] - mu[j]
                     q += 1
         for j in range(d):
+            zj = zs[j]
             for k in range(j):
                 lk = low[j, k]
+                zk = zs[k]
                 for q in range(nk):
-                    zs[j, q] -= lk * zs[k, q]
+                    zj[q] -= lk * zk[q]
             inv = 1.0 / low[j, j]
             for q in range(nk):
-                zs[j, q] *= inv
+                zj[q] *= inv
         for j in range(d - 1, -1, -1):
+            zj = zs[j]
             for k in range(j + 1, d):
                 lk = low[k, j]
+                zk = zs[k]
                 for q in range(nk):
-                    zs[j, q] -= lk * zs[k, q]
+                    zj[q] -= lk * zk[q]
             inv = 1.0 / low[j, j]
             for q in range(nk):
-                zs[j, q] *= inv
+                zj[q] *= inv
         factor = sigma2 if oracle else beta * sigma2
         for j in range(d):
             q = 0
             for i in range(m):
                 if keep[i]:
-                    out[c, j, i] = group[c, j, i] - factor * zs[j, q]
+                    oc[j, i] = gc[j, i] - factor * zs[j, q]
                     q += 1
     return
 
@@ -256,6 +266,12 @@ def _estimate_small(group, sigma2, beta, keep, out):  # pragma: no cover - numba
     return
 
 
+def group_workspace(d: int, m: int) -> tuple[np.ndarray, ...]:
+    """The workspace arrays of :func:`estimate_group` for groups of at most ``m``
+    patches of ``d`` values per channel: ``(cov, low, vec, buf)``."""
+    return (np.zeros((d, d)), np.zeros((d, d)), np.zeros((2, d)), np.zeros(2 * d * m))
+
+
 def band_height(search: int, patch: int) -> int:
     """Rows of reference positions per band: two bands of one phase never write the
     same rows (a band writes ``search`` rows above and ``search + patch - 1`` below
@@ -294,78 +310,66 @@ def _chain(flows, oks, t, cy, cx, radius, step, h, w, pos_y, pos_x, alive):  # p
 
 
 @njit(cache=True)
-def _sift_down(hd, hs, hf, hy, hx, size):  # pragma: no cover - numba
-    """Restore the max-heap order (by distance, then sequence number) from the root."""
-    i = 0
-    while True:
-        a = 2 * i + 1
-        if a >= size:
-            return
-        b = a + 1
-        big = a
-        if b < size and (hd[b] > hd[a] or (hd[b] == hd[a] and hs[b] > hs[a])):
-            big = b
-        if hd[big] > hd[i] or (hd[big] == hd[i] and hs[big] > hs[i]):
-            hd[i], hd[big] = hd[big], hd[i]
-            hs[i], hs[big] = hs[big], hs[i]
-            hf[i], hf[big] = hf[big], hf[i]
-            hy[i], hy[big] = hy[big], hy[i]
-            hx[i], hx[big] = hx[big], hx[i]
-            i = big
+def _before(cd, a, b):  # pragma: no cover - numba
+    """Candidate a comes before b: a smaller distance, or an equal one found earlier
+    (candidates are stored in the order they are found)."""
+    return cd[a] < cd[b] or (cd[a] == cd[b] and a < b)
+
+
+@njit(cache=True)
+def _select(cd, idx, count, k):  # pragma: no cover - numba
+    """Reorder ``idx[:count]`` (a permutation of candidate numbers) so that
+    ``idx[k]`` is the (k + 1)-th first candidate in (distance, order) and the
+    ones before it come before it (a quickselect, O(count) on average)."""
+    lo = 0
+    hi = count - 1
+    while lo < hi:
+        mid = (lo + hi) // 2  # the median of three as the pivot
+        if _before(cd, idx[mid], idx[lo]):
+            idx[mid], idx[lo] = idx[lo], idx[mid]
+        if _before(cd, idx[hi], idx[lo]):
+            idx[hi], idx[lo] = idx[lo], idx[hi]
+        if _before(cd, idx[hi], idx[mid]):
+            idx[hi], idx[mid] = idx[mid], idx[hi]
+        pivot = idx[mid]
+        i = lo
+        j = hi
+        while i <= j:
+            while _before(cd, idx[i], pivot):
+                i += 1
+            while _before(cd, pivot, idx[j]):
+                j -= 1
+            if i <= j:
+                idx[i], idx[j] = idx[j], idx[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
         else:
             return
+    return
 
 
 @njit(cache=True)
-def _heap_sort(hd, hs, hf, hy, hx, size):  # pragma: no cover - numba
-    """Sort the max-heap of ``size`` entries in place into increasing (distance,
-    sequence) order: the root (the largest) goes to the end, the rest is sifted down.
-    O(size log size); an insertion sort of the heap's near-decreasing array is
-    quadratic."""
-    for end in range(size - 1, 0, -1):
-        hd[0], hd[end] = hd[end], hd[0]
-        hs[0], hs[end] = hs[end], hs[0]
-        hf[0], hf[end] = hf[end], hf[0]
-        hy[0], hy[end] = hy[end], hy[0]
-        hx[0], hx[end] = hx[end], hx[0]
-        _sift_down(hd, hs, hf, hy, hx, end)
+def _nearest(cd, idx, count, n, order):  # pragma: no cover - numba
+    """The first ``min(n, count)`` candidates in (distance, order), in that order,
+    into ``order``; returns how many."""
+    for i in range(count):
+        idx[i] = i
+    if count > n:
+        _select(cd, idx, count, n - 1)
+        count = n
+    chosen = np.sort(idx[:count])  # in the order found, then stably by distance
+    ranked = np.argsort(cd[chosen], kind="mergesort")
+    for i in range(count):
+        order[i] = chosen[ranked[i]]
+    return count
 
 
 @njit(cache=True)
-def _push(hd, hs, hf, hy, hx, size, cap, dist, seq, f, y, x):  # pragma: no cover - numba
-    """Offer a candidate to the max-heap of the ``cap`` nearest; return the new size.
-    Candidates come in increasing ``seq``, so a tie with the worst kept one loses."""
-    if size < cap:
-        i = size
-        hd[i] = dist
-        hs[i] = seq
-        hf[i] = f
-        hy[i] = y
-        hx[i] = x
-        while i > 0:  # sift up
-            parent = (i - 1) // 2
-            if hd[i] > hd[parent] or (hd[i] == hd[parent] and hs[i] > hs[parent]):
-                hd[i], hd[parent] = hd[parent], hd[i]
-                hs[i], hs[parent] = hs[parent], hs[i]
-                hf[i], hf[parent] = hf[parent], hf[i]
-                hy[i], hy[parent] = hy[parent], hy[i]
-                hx[i], hx[parent] = hx[parent], hx[i]
-                i = parent
-            else:
-                break
-        return size + 1
-    if dist < hd[0]:
-        hd[0] = dist
-        hs[0] = seq
-        hf[0] = f
-        hy[0] = y
-        hx[0] = x
-        _sift_down(hd, hs, hf, hy, hx, size)
-    return size
-
-
-@njit(cache=True)
-def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch, stride,
+def _band(noisy, guide, gplane, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch, stride,
           search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2, beta,
           flat, acc, weight, done):  # pragma: no cover - numba
     """One band of reference rows [y_lo, y_hi) of frame t (see the module)."""
@@ -373,10 +377,16 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
     d = patch * patch
     half = (patch - 1) // 2
     hd = np.empty(n_similar, np.float64)
-    hs = np.empty(n_similar, np.int64)
     hf = np.empty(n_similar, np.int32)
     hy = np.empty(n_similar, np.int32)
     hx = np.empty(n_similar, np.int32)
+    most = 1 + (2 * search + 1) ** 2 + 2 * radius * (2 * search_t + 1) ** 2
+    cd = np.empty(most, np.float64)  # the candidates kept, in the order found
+    cf = np.empty(most, np.int32)
+    cy = np.empty(most, np.int32)
+    cx = np.empty(most, np.int32)
+    idx = np.empty(most, np.int64)
+    order = np.empty(n_similar, np.int64)
     pos_y = np.empty(radius + 1, np.float64)
     pos_x = np.empty(radius + 1, np.float64)
     alive = np.zeros(radius + 1, np.bool_)
@@ -384,9 +394,12 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
     pilot_ws = np.empty((nc, d, n_similar), np.float32)
     est_ws = np.empty((nc, d, n_similar), np.float32)
     keep_ws = np.zeros(n_similar, np.bool_)
+    ref = np.empty((dist_channels, patch, patch), np.float32)
+    drow = np.empty(2 * max(search, search_t) + 1, np.float64)
     cov = np.zeros((d, d), np.float64)
     low = np.zeros((d, d), np.float64)
     vec = np.zeros((2, d), np.float64)
+    buf = np.zeros(2 * d * n_similar, np.float64)
     ymax = h - patch
     xmax = w - patch
     zone_lo = y_lo - search  # the top rows of the patches this band may add
@@ -399,11 +412,19 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
                 continue
             if done[t, y, x]:
                 continue
+            for c in range(dist_channels):
+                for py in range(patch):
+                    for px in range(patch):
+                        ref[c, py, px] = gplane[t, c, y + py, x + px]
             # candidates in a fixed order (the reference itself first, then frame
-            # t's window, then the windows along the flows) into a max-heap of the
-            # n_similar nearest; a distance reaching the worst kept one is abandoned
-            size = _push(hd, hs, hf, hy, hx, 0, n_similar, -1.0, 0, t, y, x)
-            seq = 1
+            # t's window, then the windows along the flows); after each window the
+            # n_similar-th nearest so far bounds the distance of the ones kept
+            cd[0] = -1.0
+            cf[0] = t
+            cy[0] = y
+            cx[0] = x
+            count = 1
+            limit = np.inf
             for side in range(2):
                 fr_step = 1 if side == 0 else -1
                 if radius > 0:
@@ -426,27 +447,51 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
                         oy = int(np.floor(pos_y[j] + 0.5)) - half
                         ox = int(np.floor(pos_x[j] + 0.5)) - half
                         win = search_t
+                    xa = max(0, ox - win)
+                    nx = min(xmax, ox + win) + 1 - xa
+                    if nx <= 0:
+                        continue
                     for yy in range(max(0, oy - win), min(ymax, oy + win) + 1):
-                        for xx in range(max(0, ox - win), min(xmax, ox + win) + 1):
-                            if f == t and yy == y and xx == x:
+                        # the distances of the row's candidates together (each summed
+                        # in a fixed order); the row is dropped once every one of
+                        # them reaches the bound
+                        for k in range(nx):
+                            drow[k] = 0.0
+                        for py in range(patch):
+                            for px in range(patch):
+                                for c in range(dist_channels):
+                                    r = ref[c, py, px]
+                                    line = gplane[f, c, yy + py]
+                                    for k in range(nx):
+                                        diff = line[xa + px + k] - r
+                                        drow[k] += diff * diff
+                            low_d = drow[0]
+                            for k in range(1, nx):
+                                low_d = min(low_d, drow[k])
+                            if low_d >= limit:
+                                break
+                        for k in range(nx):
+                            xx = xa + k
+                            if (f == t and yy == y and xx == x) or drow[k] >= limit:
                                 continue
-                            seq += 1
-                            limit = hd[0] if size == n_similar else np.inf
-                            dist = 0.0
-                            for py in range(patch):
-                                for px in range(patch):
-                                    for c in range(dist_channels):
-                                        diff = (guide[f, yy + py, xx + px, c]
-                                                - guide[t, y + py, x + px, c])
-                                        dist += diff * diff
-                                if dist >= limit:
-                                    break
-                            if dist < limit:
-                                size = _push(hd, hs, hf, hy, hx, size, n_similar, dist,
-                                             seq, f, yy, xx)
-            m = size
-            if tau > 0:  # only the candidates within tau of the reference, nearest first
-                _heap_sort(hd, hs, hf, hy, hx, m)
+                            cd[count] = drow[k]
+                            cf[count] = f
+                            cy[count] = yy
+                            cx[count] = xx
+                            count += 1
+                    if count > n_similar:  # a later candidate at this distance is not kept
+                        for i in range(count):
+                            idx[i] = i
+                        _select(cd, idx, count, n_similar - 1)
+                        limit = cd[idx[n_similar - 1]]
+            m = _nearest(cd, idx, count, n_similar, order)
+            for i in range(m):
+                q = order[i]
+                hd[i] = cd[q]
+                hf[i] = cf[q]
+                hy[i] = cy[q]
+                hx[i] = cx[q]
+            if tau > 0:  # only the candidates within tau of the reference
                 limit = tau * sigma2 * d * dist_channels
                 kept = 0
                 while kept < m and hd[kept] <= limit:
@@ -459,31 +504,41 @@ def _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch
             keep = keep_ws[:m]
             for i in range(m):
                 f = hf[i]
-                keep[i] = f == t or (hy[i] >= zone_lo and hy[i] <= zone_hi)
+                y0 = hy[i]
+                x0 = hx[i]
+                keep[i] = f == t or (y0 >= zone_lo and y0 <= zone_hi)
                 for py in range(patch):
+                    row = noisy[f, y0 + py, x0:x0 + patch]  # (patch, C)
                     for px in range(patch):
                         for c in range(nc):
-                            group[c, py * patch + px, i] = noisy[f, hy[i] + py, hx[i] + px, c]
-                            if pilot_on:
-                                pilot[c, py * patch + px, i] = guide[f, hy[i] + py,
-                                                                     hx[i] + px, c]
+                            group[c, py * patch + px, i] = row[px, c]
+                    if pilot_on:
+                        row = guide[f, y0 + py, x0:x0 + patch]
+                        for px in range(patch):
+                            for c in range(nc):
+                                pilot[c, py * patch + px, i] = row[px, c]
             est = est_ws[:, :, :m]
-            estimate_group(group, pilot, sigma2, beta, flat, keep, est, cov, low, vec)
+            estimate_group(group, pilot, sigma2, beta, flat, keep, est, cov, low, vec, buf)
             for i in range(m):
                 if not keep[i]:
                     continue
+                f = hf[i]
+                y0 = hy[i]
+                x0 = hx[i]
                 for py in range(patch):
+                    arow = acc[f, y0 + py, x0:x0 + patch]  # (patch, C)
+                    wrow = weight[f, y0 + py, x0:x0 + patch]
                     for px in range(patch):
-                        weight[hf[i], hy[i] + py, hx[i] + px] += 1.0
+                        wrow[px] += 1.0
                         for c in range(nc):
-                            acc[hf[i], hy[i] + py, hx[i] + px, c] += est[c, py * patch + px, i]
+                            arow[px, c] += est[c, py * patch + px, i]
                 if hf[i] == t:
                     done[t, hy[i], hx[i]] = True
     return
 
 
 @njit(cache=True, parallel=True)
-def _phase(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, tasks, band, patch, stride,
+def _phase(noisy, guide, gplane, pilot_on, fwd, bwd, fwd_ok, bwd_ok, tasks, band, patch, stride,
            search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2, beta,
            flat, acc, weight, done):  # pragma: no cover - numba
     h = noisy.shape[1]
@@ -491,7 +546,7 @@ def _phase(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, tasks, band, patch,
         t = tasks[i, 0]
         y_lo = tasks[i, 1] * band
         y_hi = min(y_lo + band, h)
-        _band(noisy, guide, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch,
+        _band(noisy, guide, gplane, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_hi, patch,
               stride, search, search_t, radius, n_similar, dist_channels, tau, n_min, sigma2,
               beta, flat, acc, weight, done)
 
@@ -546,17 +601,21 @@ def accumulate_pass(noisy: np.ndarray, guide: np.ndarray, oracle: bool, fwd: np.
         fwd_ok = np.zeros((1, h, w), np.bool_)
         bwd_ok = fwd_ok
         radius = 0
-    args = (np.ascontiguousarray(noisy, np.float32), np.ascontiguousarray(guide, np.float32),
-            bool(oracle), np.ascontiguousarray(fwd, np.float32),
-            np.ascontiguousarray(bwd, np.float32), np.ascontiguousarray(fwd_ok),
-            np.ascontiguousarray(bwd_ok))
+    channels = dist_channels if 0 < dist_channels <= nc else nc
+    guide = np.ascontiguousarray(guide, np.float32)
+    # the compared channels as planes (F, channels, H, W): a row of candidates reads
+    # consecutive values
+    gplane = np.ascontiguousarray(guide[..., :channels].transpose(0, 3, 1, 2))
+    args = (np.ascontiguousarray(noisy, np.float32), guide, gplane, bool(oracle),
+            np.ascontiguousarray(fwd, np.float32), np.ascontiguousarray(bwd, np.float32),
+            np.ascontiguousarray(fwd_ok), np.ascontiguousarray(bwd_ok))
     for t in refs:
         for parity in (0, 1):
             tasks = np.array([(int(t), b) for b in range(parity, nbands, 2)],
                              np.int64).reshape(-1, 2)
             if len(tasks):
                 _phase(*args, tasks, band, patch, stride, search, search_t, radius, n_similar,
-                       dist_channels if 0 < dist_channels <= nc else nc, float(tau),
+                       channels, float(tau),
                        int(n_min), float(sigma) ** 2, float(beta), float(flat), acc, weight,
                        done)
 
