@@ -98,43 +98,38 @@ def _median_kernel(src, out, size):
 def _median5_kernel(src, out):
     """5x5 median of planar ``(K, H, W)`` data with replicated borders.
 
-    The interior columns go through 25 shifted 1-D row views indexed by the loop
-    variable only, so the comparator network vectorises across the row; the two
-    border columns on each side use clamped indices.
+    The five rows of a window are copied into rows padded with two replicated
+    values at each end; 25 shifted 1-D views of them, indexed by the loop variable
+    only, feed the comparator network, which vectorises across the row.  Every
+    column, borders included, goes through that one loop (one copy of the network
+    to compile).
     """
     k, h, w = src.shape
     for r in nb.prange(k * h):
         c = r // h
         i = r - c * h
-        s0 = src[c, max(i - 2, 0)]
-        s1 = src[c, max(i - 1, 0)]
-        s2 = src[c, i]
-        s3 = src[c, min(i + 1, h - 1)]
-        s4 = src[c, min(i + 2, h - 1)]
+        pad = np.empty((5, w + 4), np.float32)
+        for q in range(5):
+            s = src[c, min(max(i + q - 2, 0), h - 1)]
+            row = pad[q]
+            row[0] = s[0]
+            row[1] = s[0]
+            row[2:w + 2] = s
+            row[w + 2] = s[w - 1]
+            row[w + 3] = s[w - 1]
+        s0 = pad[0]
+        s1 = pad[1]
+        s2 = pad[2]
+        s3 = pad[3]
+        s4 = pad[4]
+        a0, a1, a2, a3, a4 = s0[0:w], s0[1 : w + 1], s0[2 : w + 2], s0[3 : w + 3], s0[4 : w + 4]
+        b0, b1, b2, b3, b4 = s1[0:w], s1[1 : w + 1], s1[2 : w + 2], s1[3 : w + 3], s1[4 : w + 4]
+        d0, d1, d2, d3, d4 = s2[0:w], s2[1 : w + 1], s2[2 : w + 2], s2[3 : w + 3], s2[4 : w + 4]
+        e0, e1, e2, e3, e4 = s3[0:w], s3[1 : w + 1], s3[2 : w + 2], s3[3 : w + 3], s3[4 : w + 4]
+        f0, f1, f2, f3, f4 = s4[0:w], s4[1 : w + 1], s4[2 : w + 2], s4[3 : w + 3], s4[4 : w + 4]
         o = out[c, i]
-        for j in list(range(min(2, w))) + list(range(max(w - 2, 2), w)):
-            c0 = max(j - 2, 0)
-            c1 = max(j - 1, 0)
-            c3 = min(j + 1, w - 1)
-            c4 = min(j + 2, w - 1)
-            o[j] = median25(
-                s0[c0], s0[c1], s0[j], s0[c3], s0[c4],
-                s1[c0], s1[c1], s1[j], s1[c3], s1[c4],
-                s2[c0], s2[c1], s2[j], s2[c3], s2[c4],
-                s3[c0], s3[c1], s3[j], s3[c3], s3[c4],
-                s4[c0], s4[c1], s4[j], s4[c3], s4[c4],
-            )
-        n = w - 4
-        if n <= 0:
-            continue
-        a0, a1, a2, a3, a4 = s0[0:n], s0[1 : n + 1], s0[2 : n + 2], s0[3 : n + 3], s0[4 : n + 4]
-        b0, b1, b2, b3, b4 = s1[0:n], s1[1 : n + 1], s1[2 : n + 2], s1[3 : n + 3], s1[4 : n + 4]
-        d0, d1, d2, d3, d4 = s2[0:n], s2[1 : n + 1], s2[2 : n + 2], s2[3 : n + 3], s2[4 : n + 4]
-        e0, e1, e2, e3, e4 = s3[0:n], s3[1 : n + 1], s3[2 : n + 2], s3[3 : n + 3], s3[4 : n + 4]
-        f0, f1, f2, f3, f4 = s4[0:n], s4[1 : n + 1], s4[2 : n + 2], s4[3 : n + 3], s4[4 : n + 4]
-        oc = o[2 : n + 2]
-        for jj in range(n):
-            oc[jj] = median25(
+        for jj in range(w):
+            o[jj] = median25(
                 a0[jj], a1[jj], a2[jj], a3[jj], a4[jj],
                 b0[jj], b1[jj], b2[jj], b3[jj], b4[jj],
                 d0[jj], d1[jj], d2[jj], d3[jj], d4[jj],
