@@ -95,7 +95,7 @@ _USE: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
 _register("tvl1", _tvl1.solve_warp,
           "TV-L1 (grey L1 + gradient-constancy data terms, edge-weighted Huber-TV, "
           "ROF texture, median)",
-          MemoryFactors(base=205, per_channel=10), _TVL1 + _WMEDIAN, 40)
+          MemoryFactors(base=205, per_channel=10), _TVL1 + _WMEDIAN, 20)
 _register("tvl1-fast", _tvl1.solve_warp,
           "TV-L1 preview preset (pyramid ratio 0.5, 3 warps, 30 iterations)",
           MemoryFactors(base=170, per_channel=15), _TVL1, 35)
