@@ -18,15 +18,17 @@ Each warm-up call gives its kernel the argument types of the method's own call;
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
+import numba
 import numpy as np
 
-__all__ = ["LATE_KERNELS", "finish", "start", "warm_up"]
+__all__ = ["LATE_KERNELS", "beside", "finish", "start", "warm_up"]
 
 log = logging.getLogger(__name__)
 
@@ -94,7 +96,7 @@ def start(method: str) -> subprocess.Popen | None:
 
     if method not in LATE_KERNELS or (os.cpu_count() or 1) < 2:
         return None
-    if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
+    if numba.config.DISABLE_JIT:
         return None
     if kernels_cached(kernels=LATE_KERNELS[method]) is not False:
         return None
@@ -121,6 +123,17 @@ def finish(proc: subprocess.Popen | None, timeout: float = 1.0) -> None:
     except subprocess.TimeoutExpired:
         proc.terminate()
         proc.wait()
+
+
+@contextlib.contextmanager
+def beside(method: str) -> Iterator[None]:
+    """Run the body with the helper of ``method`` compiling beside it (:func:`start`,
+    then :func:`finish`, also when the body raises)."""
+    proc = start(method)
+    try:
+        yield
+    finally:
+        finish(proc)
 
 
 if __name__ == "__main__":  # pragma: no cover - the helper process

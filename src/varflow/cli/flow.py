@@ -122,8 +122,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
 
 def _cmd_flow(args: argparse.Namespace) -> int:
     import varflow
-    from varflow._warm import finish as finish_warm_up
-    from varflow._warm import start as start_warm_up
+    from varflow._warm import beside
     from varflow.io import read_image, write_flow, write_image
     from varflow.io.images import FLOW_EXTENSIONS
     from varflow.viz import flow_to_color
@@ -141,13 +140,10 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     log.info("parameters: %s", params)
     _compile_notice(method.name, args.quiet)
     t0 = time.perf_counter()
-    helper = start_warm_up(method.name)  # a cold cache: the last kernels compile beside
-    try:
-        with _Progress(f"{method.name}", args.quiet) as progress:
-            flow = varflow.flow(f0, f1, method.name, params=params, callback=progress,
-                                max_pixels=args.max_pixels)
-    finally:
-        finish_warm_up(helper)
+    # a cold cache: the last kernels compile in a helper process beside the run
+    with beside(method.name), _Progress(f"{method.name}", args.quiet) as progress:
+        flow = varflow.flow(f0, f1, method.name, params=params, callback=progress,
+                            max_pixels=args.max_pixels)
     seconds = time.perf_counter() - t0
     write_flow(out, flow)
     if png is not None:
@@ -236,8 +232,7 @@ DEMO_SEED = 4
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     import varflow
-    from varflow._warm import finish as finish_warm_up
-    from varflow._warm import start as start_warm_up
+    from varflow._warm import beside
     from varflow.evaluation.metrics import evaluate
     from varflow.generators.pairs import synthetic_pair
     from varflow.io import write_flo, write_image
@@ -250,12 +245,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     f0, f1 = _to_uint8(f0), _to_uint8(f1)  # exactly what frame0.png / frame1.png hold
     _compile_notice("tvl1", args.quiet)
     t0 = time.perf_counter()
-    helper = start_warm_up("tvl1")  # a cold cache: the last kernels compile beside
-    try:
-        with _Progress("demo", args.quiet) as progress:
-            flow = varflow.flow(f0, f1, "tvl1", callback=progress)
-    finally:
-        finish_warm_up(helper)
+    # a cold cache: the last kernels compile in a helper process beside the run
+    with beside("tvl1"), _Progress("demo", args.quiet) as progress:
+        flow = varflow.flow(f0, f1, "tvl1", callback=progress)
     seconds = time.perf_counter() - t0
     scores = evaluate(flow, gt)
     radius = float(_magnitude(gt).max())

@@ -353,15 +353,26 @@ def _select(cd, idx, count, k):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def _first(cd, idx, count, n):  # pragma: no cover - numba
+    """Put the first ``n`` of ``count`` > ``n`` candidates in (distance, order) in
+    ``idx[:n]`` (in no particular order, the n-th at ``idx[n - 1]``); return the
+    n-th's distance."""
+    for i in range(count):
+        idx[i] = i
+    _select(cd, idx, count, n - 1)
+    return cd[idx[n - 1]]
+
+
+@njit(cache=True)
 def _nearest(cd, idx, count, n, order):  # pragma: no cover - numba
     """The first ``min(n, count)`` candidates in (distance, order), in that order,
     into ``order``; returns how many."""
-    for i in range(count):
-        idx[i] = i
     if count > n:
-        _select(cd, idx, count, n - 1)
+        _first(cd, idx, count, n)
         count = n
-    chosen = np.sort(idx[:count])  # in the order found, then stably by distance
+        chosen = np.sort(idx[:count])  # in the order found, then stably by distance
+    else:
+        chosen = np.arange(count)
     ranked = np.argsort(cd[chosen], kind="mergesort")
     for i in range(count):
         order[i] = chosen[ranked[i]]
@@ -480,10 +491,7 @@ def _band(noisy, guide, gplane, pilot_on, fwd, bwd, fwd_ok, bwd_ok, t, y_lo, y_h
                             cx[count] = xx
                             count += 1
                     if count > n_similar:  # a later candidate at this distance is not kept
-                        for i in range(count):
-                            idx[i] = i
-                        _select(cd, idx, count, n_similar - 1)
-                        limit = cd[idx[n_similar - 1]]
+                        limit = _first(cd, idx, count, n_similar)
             m = _nearest(cd, idx, count, n_similar, order)
             for i in range(m):
                 q = order[i]
