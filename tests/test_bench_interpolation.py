@@ -118,16 +118,20 @@ def fake_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_split_rule_alternates_over_sorted_cases(fake_root: Path) -> None:
-    counts = {"middlebury": (6, 6), "ucf101": (11, 10), "sintel": (12, 12)}
+    counts = {"middlebury": (6, 6), "ucf101": (11, 10), "sintel": (12, 12),
+              "sintel-x4": (18, 18)}
     for s in isets.INTERPOLATION_SETS:
         every = isets.interpolation_cases(s, "all", fake_root)
         names = [c.name for c in every]
         assert names == sorted(names)
         tuning = [c.name for c in isets.interpolation_cases(s, "tuning", fake_root)]
         reporting = [c.name for c in isets.interpolation_cases(s, "reporting", fake_root)]
-        assert tuning == names[0::2] and reporting == names[1::2]
+        step = 3 if s == "sintel-x4" else 1  # x4: the groups of three times alternate
+        groups = [names[i:i + step] for i in range(0, len(names), step)]
+        assert tuning == sum(groups[0::2], []) and reporting == sum(groups[1::2], [])
         assert (len(tuning), len(reporting)) == counts[s]
-        assert all(c.t == 0.5 for c in every)
+        want = isets.X4_TIMES * 12 if s == "sintel-x4" else (0.5,) * len(every)
+        assert tuple(c.t for c in every) == want
     assert [c.name for c in isets.interpolation_cases("middlebury", "tuning", fake_root)] == [
         "Beanbags", "DogDance", "Grove3", "MiniCooper", "Urban2", "Venus"]
     assert [isets.split_of(i) for i in range(4)] == ["tuning", "reporting"] * 2
@@ -149,6 +153,19 @@ def test_sintel_cases_and_context(fake_root: Path) -> None:
     ucf = isets.interpolation_cases("ucf101", "all", fake_root)[0]
     assert (ucf.frame0.name, ucf.frame1.name, ucf.gt.name) == ("frame0.png", "frame2.png",
                                                                "frame1.png")
+
+
+def test_sintel_x4_cases(fake_root: Path) -> None:
+    cases = isets.interpolation_cases("sintel-x4", "all", fake_root)
+    assert len(cases) == 36 and cases[0].name == "frame_0002" and cases[-1].name == "frame_0048"
+    # group c = 7: frames 5 and 9 give 6, 7, 8 at t = 1/4, 1/2, 3/4; context 1 and 13
+    for case, (gt, t) in zip(cases[3:6], ((6, 0.25), (7, 0.5), (8, 0.75)), strict=True):
+        assert (case.frame0.name, case.frame1.name, case.gt.name) == (
+            "frame_0005.png", "frame_0009.png", f"frame_{gt:04d}.png")
+        assert case.t == t and case.split == "reporting"
+        assert (case.previous.name, case.following.name) == ("frame_0001.png", "frame_0013.png")
+    assert cases[0].previous is None and cases[-1].following is None
+    assert {c.split for c in cases[:3]} == {"tuning"}
 
 
 def test_missing_data_names_the_path_and_the_variable(tmp_path: Path) -> None:
@@ -218,6 +235,26 @@ def test_format_tables_gains_and_wins() -> None:
     assert lines["blend"][8] == "0/3"
     assert lines["minterpolate"][7] == "-1.00" and lines["minterpolate"][8] == "-"
     assert "3 cases, split reporting" in text
+    assert "means at t" not in text  # one time: no per-time tables
+
+
+def test_format_tables_per_time() -> None:
+    def row(case: str, t: float, method: str, p: float) -> dict:
+        return {"set": "sintel-x4", "split": "tuning", "case": case, "t": t, "method": method,
+                "psnr": p, "ssim": 0.9, "ie": 5.0, "ne": 1.0, "mae": 2.0, "seconds": 0.5}
+
+    rows = [row("frame_0002", 0.25, "splat", 36.0), row("frame_0002", 0.25, "minterpolate", 33.0),
+            row("frame_0003", 0.5, "splat", 30.0), row("frame_0003", 0.5, "minterpolate", 31.0),
+            row("frame_0004", 0.75, "splat", 34.0), row("frame_0004", 0.75, "minterpolate", 32.0)]
+    text = bi.format_tables(rows, per_case=False)
+    parts = text.split("\n\n")
+    titles = [p for p in parts if p.startswith("MPI-Sintel")]
+    assert [t.rsplit(", ", 1)[1] for t in titles] == [
+        "means", "means at t = 0.25", "means at t = 0.5", "means at t = 0.75"]
+    at_half = parts[parts.index(titles[2]) + 1]
+    splat = next(ln for ln in at_half.splitlines() if ln.startswith("| splat"))
+    cells = [c.strip() for c in splat.split("|")[1:-1]]
+    assert cells[1:3] == ["1", "30.00"] and cells[7] == "-1.00" and cells[9] == "0/1"
 
 
 def test_timing_on_a_resized_pair(fake_root: Path) -> None:
@@ -302,7 +339,8 @@ def test_cli_peers_on_fake_data_with_csv(capsys, fake_root: Path, tmp_path: Path
         rows = list(csv.DictReader(f))
     assert [r["set"] for r in rows] == ["ucf101"] * 4 + ["timing"] * 2
     assert [r["case"] for r in rows[:4]] == ["02", "02", "04", "04"]
-    assert list(rows[0])[:12] == list(bi.INTERPOLATION_CSV_FIELDS)
+    assert list(rows[0])[:13] == list(bi.INTERPOLATION_CSV_FIELDS)
+    assert [float(r["t"]) for r in rows[:4]] == [0.5] * 4
     assert all(math.isfinite(float(r["psnr"])) for r in rows)
 
 

@@ -236,13 +236,16 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, argv: Sequence[str] | 
                         "(Middlebury, UCF101, MPI-Sintel), with FFmpeg minterpolate",
                         description="Interpolation methods (varflow.interpolate) and peers "
                         "(FFmpeg minterpolate via PyAV, blend, repeat) synthesise the frame "
-                        "halfway between two frames; it is scored against the true one: "
+                        "between two frames at the time of a true one and are scored against "
+                        "it: "
                         "PSNR and SSIM, Baker et al.'s IE and NE, and MAE (the mean "
                         "absolute difference learned methods call 'IE'), all on 0-255.  Sets: "
                         "the 12 Middlebury interpolation sequences, 21 UCF101 triplets and "
                         "MPI-Sintel final/alley_1 (odd frames from their neighbours; methods "
-                        "that use context get frames i-3 and i+3).  In each set the sorted "
-                        "cases alternate tuning (even positions) / reporting (odd).  Per set: "
+                        "that use context get frames i-3 and i+3) and its x4 slow motion "
+                        "(sintel-x4: frames c-2 and c+2 give c-1, c, c+1 at t = 1/4, 1/2, "
+                        "3/4).  In each set the sorted cases (sintel-x4: groups) alternate "
+                        "tuning (even positions) / reporting (odd).  Per set (and per t): "
                         "a per-case table and the means, the PSNR gain over minterpolate and "
                         "over naive, the cases won against minterpolate and median seconds; "
                         "then the seconds per 960x540 frame of every method and peer.")
@@ -726,7 +729,8 @@ def _cmd_bench_interpolation(args: argparse.Namespace) -> int:
     names = ", ".join(methods + peers)
     rows: list[dict[str, Any]] = []
     if not args.timing_only:
-        print(f"Frame interpolation at t = 0.5 ({', '.join(sets)}; {args.split} split"
+        print(f"Frame interpolation ({', '.join(sets)}; {args.split} split; t = 0.5, "
+              f"sintel-x4 1/4, 1/2, 3/4"
               + (f", first {args.max_cases} cases per set" if args.max_cases else "")
               + f"): {names}.  PSNR (dB, RGB) and SSIM (Gaussian 11x11, sigma 1.5, mean "
               f"over channels) on 0-255; IE: Baker et al. RMS colour error, NE: IE with "

@@ -22,14 +22,22 @@ The sets (:data:`INTERPOLATION_SETS`):
     t = 0.5; with the 4-frame context ``previous`` = frame i − 3 and ``following`` =
     frame i + 3 when they exist (i − 3 ≥ 1, i + 3 ≤ 50), else None.  The case is
     named ``frame_NNNN`` after its middle frame.
+``"sintel-x4"``
+    ×4 slow motion on the same clip: for each group centre c = 3, 7, ..., 47 the
+    pair c − 2, c + 2 and the three frames between it, c − 1, c and c + 1, at
+    t = 1/4, 1/2 and 3/4; context ``previous`` = frame c − 6 and ``following`` =
+    frame c + 6 when they exist.  12 groups, 36 cases, each named after its true
+    frame (``frame_0002`` ... ``frame_0048``).
 
 Tuning and reporting splits
 ---------------------------
 Fixed: in each set the cases are sorted by name and alternate, the even positions
 (0, 2, 4, ...) forming the ``"tuning"`` split (for choosing parameters) and the odd
-positions the ``"reporting"`` split (for the numbers one quotes).  Both splits
+positions the ``"reporting"`` split (for the numbers one quotes); in ``"sintel-x4"``
+the groups alternate, the three times of a group staying together.  Both splits
 cover every set: Middlebury 6 + 6 (tuning: Beanbags, DogDance, Grove3,
-MiniCooper, Urban2, Venus), UCF101 11 + 10, Sintel 12 + 12.  ``"all"`` is both.
+MiniCooper, Urban2, Venus), UCF101 11 + 10, Sintel 12 + 12, Sintel ×4 18 + 18
+(6 + 6 groups).  ``"all"`` is both.
 The split of a case depends only on its position in the full, fixed list of its
 set, never on which files are on disk.
 
@@ -60,6 +68,7 @@ __all__ = [
     "SINTEL_CLIP",
     "SINTEL_FRAMES",
     "SINTEL_PASS",
+    "X4_TIMES",
     "UCF101_TRIPLETS",
     "CaseFrames",
     "InterpolationCase",
@@ -70,7 +79,7 @@ __all__ = [
 ]
 
 #: The sets, in the order the benchmark runs them.
-INTERPOLATION_SETS: tuple[str, ...] = ("middlebury", "ucf101", "sintel")
+INTERPOLATION_SETS: tuple[str, ...] = ("middlebury", "ucf101", "sintel", "sintel-x4")
 
 #: Values of ``split``.
 INTERPOLATION_SPLITS: tuple[str, ...] = ("tuning", "reporting", "all")
@@ -89,6 +98,9 @@ SINTEL_CLIP = "alley_1"
 SINTEL_PASS = "final"
 SINTEL_FRAMES = 50
 
+#: The times of the ``"sintel-x4"`` cases between their pair (frames c - 2, c + 2).
+X4_TIMES: tuple[float, ...] = (0.25, 0.5, 0.75)
+
 _HINT = (f"pass --data DIR or set {ENV_VAR} to the folder holding interpolation/ "
          "(and sintel/)")
 
@@ -104,7 +116,7 @@ class CaseFrames(NamedTuple):
         The true frame at the case's ``t``.
     previous, following : ndarray or None
         The frames before ``frame0`` and after ``frame1`` at the pair's spacing
-        (Sintel), else None.
+        (the Sintel sets), else None.
     """
 
     frame0: np.ndarray
@@ -243,16 +255,24 @@ def _all_cases(set_name: str, root: Path) -> tuple[Path, list[InterpolationCase]
             d = folder / name
             cases.append(InterpolationCase("ucf101", name, d / "frame0.png", d / "frame2.png",
                                            d / "frame1.png", 0.5, split_of(i)))
-    elif set_name == "sintel":
+    elif set_name in ("sintel", "sintel-x4"):
         folder = root / "sintel" / "training" / SINTEL_PASS / SINTEL_CLIP
 
         def frame(n: int) -> Path | None:
             return folder / f"frame_{n:04d}.png" if 1 <= n <= SINTEL_FRAMES else None
 
-        for pos, i in enumerate(range(3, SINTEL_FRAMES, 2)):
-            cases.append(InterpolationCase(
-                "sintel", f"frame_{i:04d}", frame(i - 1), frame(i + 1), frame(i), 0.5,
-                split_of(pos), previous=frame(i - 3), following=frame(i + 3)))
+        if set_name == "sintel":
+            for pos, i in enumerate(range(3, SINTEL_FRAMES, 2)):
+                cases.append(InterpolationCase(
+                    "sintel", f"frame_{i:04d}", frame(i - 1), frame(i + 1), frame(i), 0.5,
+                    split_of(pos), previous=frame(i - 3), following=frame(i + 3)))
+        else:
+            for pos, c in enumerate(range(3, SINTEL_FRAMES - 1, 4)):
+                for k, t in enumerate(X4_TIMES):
+                    i = c - 1 + k
+                    cases.append(InterpolationCase(
+                        "sintel-x4", f"frame_{i:04d}", frame(c - 2), frame(c + 2), frame(i),
+                        t, split_of(pos), previous=frame(c - 6), following=frame(c + 6)))
     else:
         check_sets([set_name])
         raise AssertionError(set_name)  # pragma: no cover - check_sets raised

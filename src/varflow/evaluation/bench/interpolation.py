@@ -84,8 +84,8 @@ TIMING_SHAPE: tuple[int, int] = (540, 960)
 
 #: The leading columns of the benchmark's CSV.
 INTERPOLATION_CSV_FIELDS: tuple[str, ...] = (
-    "set", "split", "case", "method", "kind", "context", "psnr", "ssim", "ie", "ne", "mae",
-    "seconds",
+    "set", "split", "case", "t", "method", "kind", "context", "psnr", "ssim", "ie", "ne",
+    "mae", "seconds",
 )
 
 
@@ -248,7 +248,8 @@ def run_interpolation_bench(
     list of dict
         One row per (set, case, method) in set, case, method order (the varflow
         methods first, then the peers): ``set``, ``split``, ``case``, ``method``,
-        ``kind`` (``"varflow"`` or ``"peer"``), ``context`` (how many of
+        ``t`` (the time of the true frame between the pair), ``kind`` (``"varflow"``
+        or ``"peer"``), ``context`` (how many of
         ``previous`` / ``following`` the method was given), ``psnr`` (dB),
         ``ssim``, ``ie``, ``ne``, ``mae`` (0-255 units) and ``seconds`` (wall time
         of the one frame, reading excluded).
@@ -294,7 +295,7 @@ def run_interpolation_bench(
                 scores = frame_scores(est, frames.gt)
                 n_ctx = sum(f is not None for f in (frames.previous, frames.following))
                 row = {"set": case.set, "split": case.split, "case": case.name,
-                       "method": name, "kind": kind,
+                       "t": case.t, "method": name, "kind": kind,
                        "context": n_ctx if use_context else 0, **scores,
                        "seconds": seconds}
                 log.info("%s %s %s: PSNR %.2f SSIM %.4f IE %.2f in %.2fs", case.set,
@@ -556,6 +557,8 @@ _SET_TITLES = {
     "ucf101": "UCF101 triplets (frame0, frame2 -> frame1)",
     "sintel": f"MPI-Sintel {SINTEL_PASS}/{SINTEL_CLIP} (frames i-1, i+1 -> i, i odd; "
               "context i-3, i+3 for methods that use it)",
+    "sintel-x4": f"MPI-Sintel {SINTEL_PASS}/{SINTEL_CLIP} x4 (frames c-2, c+2 -> c-1, c, c+1 "
+                 "at t = 1/4, 1/2, 3/4, c = 3, 7, ..., 47; context c-6, c+6)",
 }
 
 
@@ -626,7 +629,8 @@ def format_tables(rows: Sequence[Mapping[str, Any]],
 
     Per set (in :data:`INTERPOLATION_SETS` order), a title, then (``per_case``) the
     per-case table: a line per (case, method) with PSNR (dB), SSIM, IE, NE, MAE
-    (0-255) and seconds; then the summary: per method the number of cases ``n``,
+    (0-255) and seconds; then the summary (and, for a set whose cases have several
+    times ``t``, one summary per time): per method the number of cases ``n``,
     the mean of each measure, ``dPSNR vs minterpolate`` and ``dPSNR vs naive`` (the
     mean over the cases of the method's PSNR minus the reference's; "-" when the
     reference did not run), ``wins vs minterpolate`` (cases with a strictly higher
@@ -663,6 +667,11 @@ def format_tables(rows: Sequence[Mapping[str, Any]],
         if per_case:
             parts.append(f"{title}, per case\n\n{_case_table(group)}")
         parts.append(f"{title}, means\n\n{_summary_table(group)}")
+        times = sorted({t for t in (_val(r, "t") for r in group) if math.isfinite(t)})
+        if len(times) > 1:  # one summary per time (the x4 protocol)
+            for t in times:
+                at_t = [r for r in group if _val(r, "t") == t]
+                parts.append(f"{title}, means at t = {t:g}\n\n{_summary_table(at_t)}")
     if timing:
         parts.append(format_timing_table(timing))
     return "\n\n".join(parts) if parts else "(no results)"
