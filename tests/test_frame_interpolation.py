@@ -203,12 +203,52 @@ def test_fill_holes_engines_agree_and_keep_known_values() -> None:
     ("splat_sharpness", -1.0), ("occlusion_cost", np.nan), ("fb_tolerance", "3"),
     ("fb_relative", True), ("sampling", "nearest"), ("visibility_blend", 1),
     ("quadratic", "yes"), ("flow_method", "nope"), ("flow_max_pixels", -1),
-    ("flow_max_pixels", 2.5), ("fallback_blur", -0.5)])
+    ("flow_max_pixels", 2.5), ("fallback_blur", -0.5), ("lost_error", -0.1),
+    ("lost_fraction", 1.5), ("lost_fraction", True)])
 def test_splat_params_name_the_field(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=field):
         SplatParams(**{field: value})
     with pytest.raises(ValueError, match=field):
         varflow.interpolate(np.zeros((8, 8)), np.zeros((8, 8)), 0.5, "splat", **{field: value})
+
+
+def blotchy(seed: int, h: int = 96, w: int = 128) -> np.ndarray:
+    """A colour texture of blobs about 4 px across (uniform noise on a grid 4 times
+    coarser, upsampled bicubically), uint8."""
+    import cv2
+
+    coarse = np.random.default_rng(seed).uniform(0, 255, (h // 4, w // 4, 3)).astype(np.float32)
+    return np.clip(cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC), 0, 255).astype(
+        np.uint8)
+
+
+@pytest.mark.parametrize("method", ["splat", "splat-fast"])
+def test_a_flow_that_explains_nothing_gives_the_blend(method: str) -> None:
+    """Two unrelated textures (a cut, or a flow lost everywhere): the true frame between
+    them is their blend, and the flows can only tear it; the frame is the blend (57 dB:
+    the rounding to uint8), not the torn splat (15 dB with step 6 off)."""
+    def db(x: np.ndarray, y: np.ndarray) -> float:  # PSNR on 0-255, float truth
+        return float(10 * np.log10(255.0 ** 2 / np.mean((x.astype(np.float64) - y) ** 2)))
+
+    a, b = blotchy(1), blotchy(2)
+    for t in (0.5, 0.25):
+        truth = (1 - t) * a.astype(np.float64) + t * b
+        out = varflow.interpolate(a, b, t, method)
+        assert db(out, truth) > db(np.round(truth), truth) - 0.5, t
+    torn = varflow.interpolate(a, b, 0.5, method, lost_fraction=0.0)
+    assert db(torn, 0.5 * a.astype(np.float64) + 0.5 * b) < 25
+
+
+def test_lost_share_and_weight() -> None:
+    from varflow.retime.splatting import lost_share, lost_weight
+
+    z = np.zeros((40, 60), np.float32)
+    z[:, :30] = 0.3  # the left half lost (and the 1.7 px the blur spreads it by)
+    assert lost_share((z, np.zeros_like(z)), 0.1) == pytest.approx(31.7 / 120, abs=0.01)
+    assert lost_share((z, z), 0.1) == pytest.approx(31.7 / 60, abs=0.02)
+    assert lost_share((z,), 0.5) == 0.0
+    assert [lost_weight(m, 0.5) for m in (0.0, 0.25, 0.375, 0.5, 0.9)] == [0, 0, 0.5, 1, 1]
+    assert lost_weight(1.0, 0.0) == 0.0
 
 
 def test_occlusions_with_exact_flows_leave_no_ghost() -> None:

@@ -40,9 +40,19 @@ bidirectional, with softmax splatting (Niklaus & Liu 2020) as its z-buffer:
    frame is softened there by a Gaussian of σ = :attr:`SplatParams.fallback_blur`
    rather than showing two sharp, misplaced copies (a gain on every set;
    benchmarks/HISTORY.md).
+6. **Where the motion is not known anywhere**: when the flows explain neither frame
+   (two unrelated pictures: a scene cut, a flash, a failure of the flow on the whole
+   frame), splatting shows torn, misplaced pieces.  A pixel's flow is *lost* where its
+   photometric error ``Z``, averaged by a Gaussian of σ 4 px, exceeds
+   :attr:`SplatParams.lost_error`; with ``m`` the share of lost pixels of both
+   frames and ``f`` = :attr:`SplatParams.lost_fraction`, the frame fades toward the
+   plain blend ``(1 − t) I0 + t I1`` with the weight ``clip(2 m / f − 1, 0, 1)``:
+   untouched while a quarter of the pixels or fewer are lost at the default, the
+   blend where half are.  (On every pair of the interpolation sets at most 4 % of
+   the pixels are lost; on two unrelated textures all are.)
 
-The motion (steps 1-2, and the accelerations) is estimated once per pair; steps 3-5
-run for every ``t``.
+The motion (steps 1-2, the accelerations and the lost share) is estimated once per
+pair; steps 3-6 run for every ``t``.
 
 References
 ----------
@@ -129,6 +139,15 @@ class SplatParams(FlowComposed):
         as a video has them), move the pixels along quadratic trajectories (step
         3 of the module notes); without them, or False, linear motion.  Default
         True.
+    lost_error : float
+        τ_L of step 6: a pixel's flow is lost where its photometric error,
+        averaged over a Gaussian of σ 4 px, exceeds it (intensity units, frames in
+        [0, 1]).  Default 0.1 (at most 0.021 on average over a pair of the
+        interpolation sets; 0.25 between unrelated textures).
+    lost_fraction : float
+        f of step 6: the share of lost pixels at which the frame is the plain
+        blend (half of it starts the fade), in [0, 1]; 0 turns step 6 off.
+        Default 0.5.
     """
 
     flow_method: str = "tvl1-ld"
@@ -142,6 +161,8 @@ class SplatParams(FlowComposed):
     visibility_blend: bool = True
     fallback_blur: float = 2.0
     quadratic: bool = True
+    lost_error: float = 0.1
+    lost_fraction: float = 0.5
 
     @classmethod
     def default_flow_params(cls, flow_method: str) -> TVL1Params:
@@ -156,7 +177,7 @@ class SplatParams(FlowComposed):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("splat_sharpness", "occlusion_cost", "fb_tolerance", "fb_relative",
-                     "fallback_blur"):
+                     "fallback_blur", "lost_error"):
             v = getattr(self, name)
             check_field(isinstance(v, (int, float)) and not isinstance(v, bool)
                         and np.isfinite(v) and v >= 0, name,
@@ -164,6 +185,10 @@ class SplatParams(FlowComposed):
         check_field(isinstance(self.flow_max_pixels, int) and not isinstance(
             self.flow_max_pixels, bool) and self.flow_max_pixels >= 0, "flow_max_pixels",
             f"must be an integer >= 0, got {self.flow_max_pixels!r}")
+        check_field(isinstance(self.lost_fraction, (int, float))
+                    and not isinstance(self.lost_fraction, bool)
+                    and 0.0 <= self.lost_fraction <= 1.0, "lost_fraction",
+                    f"must be a number in [0, 1], got {self.lost_fraction!r}")
         check_field(self.sampling in SAMPLINGS, "sampling",
                     f"expected one of {', '.join(SAMPLINGS)}, got {self.sampling!r}")
         for name in ("visibility_blend", "quadratic"):
@@ -207,6 +232,9 @@ class SplatMotion(PairMotion):
         ``O0`` and ``O1``.
     importance0, importance1 : ndarray, shape (H, W), float64
         ``exp(−α Z)`` of the pixels of each frame.
+    lost : float
+        The share of the pixels of both frames whose flow is lost (step 6 of the
+        module notes), in [0, 1].
     """
 
     def __init__(self, frame0: np.ndarray, frame1: np.ndarray, f01: np.ndarray,
@@ -228,12 +256,14 @@ class SplatMotion(PairMotion):
         self._unit = 1.0 if inside else 1.0 / max(float(self._hi - self._lo), 1e-12)
         self.hidden0 = hidden_mask(self.f01, self.f10, p.fb_tolerance, p.fb_relative)
         self.hidden1 = hidden_mask(self.f10, self.f01, p.fb_tolerance, p.fb_relative)
-        self.importance0 = self._importance(frame0, frame1, self.f01, self.hidden0)
-        self.importance1 = self._importance(frame1, frame0, self.f10, self.hidden1)
+        z0 = photometric_error(frame0, frame1, self.f01) * np.float32(self._unit)
+        z1 = photometric_error(frame1, frame0, self.f10) * np.float32(self._unit)
+        self.importance0 = self._importance(z0, self.hidden0)
+        self.importance1 = self._importance(z1, self.hidden1)
+        self.lost = lost_share((z0, z1), p.lost_error)
 
-    def _importance(self, a: np.ndarray, b: np.ndarray, flow: np.ndarray,
-                    hidden: np.ndarray) -> np.ndarray:
-        cost = photometric_error(a, b, flow).astype(np.float64) * self._unit
+    def _importance(self, error: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+        cost = error.astype(np.float64)
         cost += self.params.occlusion_cost * hidden
         # float64: exp(-alpha Z) stays positive for any cost of interest (a landing
         # pixel counts as covered however costly; float32 underflows near exp(-103))
@@ -298,7 +328,47 @@ class SplatMotion(PairMotion):
                     out += both * (smooth_image_fast(out, sigma) - out)
         else:
             out = (1 - t32) * s0 + t32 * s1
+        fade = lost_weight(self.lost, p.lost_fraction)
+        if fade > 0:  # step 6: the flows explain nothing; toward the plain blend
+            blend = (1 - t32) * self.frame0 + t32 * self.frame1
+            out = out + np.float32(fade) * (blend - out)
         return np.clip(out, self._lo, self._hi).astype(np.float32)
+
+
+#: σ (px) of the Gaussian that averages the photometric error in :func:`lost_share`.
+LOST_SIGMA = 4.0
+
+
+def lost_share(errors: tuple[np.ndarray, ...], threshold: float) -> float:
+    """The share of pixels whose flow is lost: their photometric error, averaged by
+    a Gaussian of σ :data:`LOST_SIGMA` px, above ``threshold``.
+
+    Parameters
+    ----------
+    errors : tuple of ndarray, each (H, W) float32
+        The photometric errors ``Z`` of each frame's flow (intensity units).
+    threshold : float
+        τ_L (:attr:`SplatParams.lost_error`).
+
+    Returns
+    -------
+    float
+        In [0, 1]: lost pixels over all pixels of all the frames.
+    """
+    lost = total = 0
+    for z in errors:
+        r = smooth_image_fast(np.ascontiguousarray(z, np.float32)[..., None], LOST_SIGMA)
+        lost += int(np.count_nonzero(r > np.float32(threshold)))
+        total += z.size
+    return lost / max(total, 1)
+
+
+def lost_weight(share: float, fraction: float) -> float:
+    """The weight of the plain blend in step 6: ``clip(2 share / fraction − 1, 0, 1)``
+    (0 when ``fraction`` is 0)."""
+    if fraction <= 0:
+        return 0.0
+    return float(min(max(2.0 * share / fraction - 1.0, 0.0), 1.0))
 
 
 def accelerations(f01: np.ndarray, f10: np.ndarray, f0m: np.ndarray | None,
