@@ -227,15 +227,28 @@ def test_format_tables_gains_and_wins() -> None:
     text = bi.format_tables(rows, per_case=False)
     lines = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]]
              for ln in text.splitlines() if ln.startswith("| ") and "method" not in ln}
-    # columns: n, PSNR, SSIM, IE, NE, MAE, dPSNR vs minterpolate, dPSNR vs naive, wins, s
+    # columns: n, PSNR, worst 10 %, SSIM, IE, NE, MAE, dPSNR vs minterpolate,
+    # dPSNR vs naive, wins, s
     assert lines["naive"][0] == "3" and lines["naive"][1] == "30.33"
-    assert lines["naive"][6] == "1.00" and lines["naive"][7] == "-"
-    assert lines["naive"][8] == "2/3"
-    assert lines["blend"][6] == "-3.33" and lines["blend"][7] == "-4.33"
-    assert lines["blend"][8] == "0/3"
-    assert lines["minterpolate"][7] == "-1.00" and lines["minterpolate"][8] == "-"
+    assert lines["naive"][2] == "28.00" and lines["blend"][2] == "25.00"
+    assert lines["naive"][7] == "1.00" and lines["naive"][8] == "-"
+    assert lines["naive"][9] == "2/3"
+    assert lines["blend"][7] == "-3.33" and lines["blend"][8] == "-4.33"
+    assert lines["blend"][9] == "0/3"
+    assert lines["minterpolate"][8] == "-1.00" and lines["minterpolate"][9] == "-"
     assert "3 cases, split reporting" in text
+    assert "cases lost" not in text  # no varflow method among the rows
+    rows = [dict(r, kind="varflow" if r["method"] == "naive" else "peer") for r in rows]
+    text = bi.format_tables(rows, per_case=False)
+    assert "- `naive`: b (28.00 / 29.00)" in text
     assert "means at t" not in text  # one time: no per-time tables
+
+
+def test_worst_decile() -> None:
+    assert bi.worst_decile([30.0, 20.0, 40.0]) == 20.0  # ceil(3 / 10) = 1 case
+    values = [float(v) for v in range(11)] + [math.nan]
+    assert bi.worst_decile(values) == 0.5  # ceil(11 / 10) = 2 cases, NaN left out
+    assert math.isnan(bi.worst_decile([math.nan]))
 
 
 def test_format_tables_per_time() -> None:
@@ -254,7 +267,7 @@ def test_format_tables_per_time() -> None:
     at_half = parts[parts.index(titles[2]) + 1]
     splat = next(ln for ln in at_half.splitlines() if ln.startswith("| splat"))
     cells = [c.strip() for c in splat.split("|")[1:-1]]
-    assert cells[1:3] == ["1", "30.00"] and cells[7] == "-1.00" and cells[9] == "0/1"
+    assert cells[1:4] == ["1", "30.00", "30.00"] and cells[8] == "-1.00" and cells[10] == "0/1"
 
 
 def test_timing_on_a_resized_pair(fake_root: Path) -> None:

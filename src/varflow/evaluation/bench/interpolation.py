@@ -66,6 +66,7 @@ __all__ = [
     "run_interpolation_timing",
     "timing_clip",
     "timing_pair",
+    "worst_decile",
 ]
 
 log = logging.getLogger(__name__)
@@ -590,7 +591,7 @@ def _summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
         both = [(a, b) for a, b in both if not (math.isnan(a) or math.isnan(b))]
         return f"{sum(a > b for a, b in both)}/{len(both)}"
 
-    header = (["method", "n"] + [h for _, h, _ in _MEASURES]
+    header = (["method", "n", "PSNR", "worst 10 %"] + [h for _, h, _ in _MEASURES[1:]]
               + [f"dPSNR vs {BASELINE_PEER}", f"dPSNR vs {BASELINE_METHOD}",
                  f"wins vs {BASELINE_PEER}", "s/frame (median)"])
     body = []
@@ -598,11 +599,38 @@ def _summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
         mine = [cell[(c, m)] for c in cases if (c, m) in cell]
         secs = [_val(r, "seconds") for r in mine]
         secs = [s for s in secs if math.isfinite(s)]
-        body.append([m, str(len(mine))]
-                    + [_num(_nanmean([_val(r, k) for r in mine]), d) for k, _, d in _MEASURES]
+        means = [_num(_nanmean([_val(r, k) for r in mine]), d) for k, _, d in _MEASURES]
+        body.append([m, str(len(mine)), means[0],
+                     _num(worst_decile([_val(r, "psnr") for r in mine]), 2)] + means[1:]
                     + [gain(m, BASELINE_PEER), gain(m, BASELINE_METHOD), wins(m),
                        _num(statistics.median(secs) if secs else math.nan, 3)])
     return markdown_table(header, body)
+
+
+def worst_decile(values: Sequence[float]) -> float:
+    """The mean of the worst 10 % of ``values`` (the lowest ``ceil(n / 10)``, NaN left
+    out): what a user retiming a clip sees on its worst frames.  NaN when none."""
+    finite = sorted(v for v in values if math.isfinite(v))
+    if not finite:
+        return math.nan
+    k = math.ceil(len(finite) / 10)
+    return float(np.mean(finite[:k]))
+
+
+def _losses(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The cases each varflow method loses against the baseline peer (its PSNR not
+    above the peer's): one line per method, ``case (method / peer dB)``."""
+    cell = {(str(r["case"]), str(r["method"])): r for r in rows}
+    cases = list(dict.fromkeys(str(r["case"]) for r in rows))
+    lines = []
+    for m in dict.fromkeys(str(r["method"]) for r in rows if r.get("kind") == "varflow"):
+        lost = []
+        for c in cases:
+            a, b = _val(cell.get((c, m)), "psnr"), _val(cell.get((c, BASELINE_PEER)), "psnr")
+            if math.isfinite(a) and math.isfinite(b) and not a > b:
+                lost.append(f"{c} ({a:.2f} / {b:.2f})")
+        lines.append(f"- `{m}`: {', '.join(lost) if lost else 'none'}")
+    return "\n".join(lines)
 
 
 def format_timing_table(rows: Sequence[Mapping[str, Any]]) -> str:
@@ -631,11 +659,14 @@ def format_tables(rows: Sequence[Mapping[str, Any]],
     per-case table: a line per (case, method) with PSNR (dB), SSIM, IE, NE, MAE
     (0-255) and seconds; then the summary (and, for a set whose cases have several
     times ``t``, one summary per time): per method the number of cases ``n``,
-    the mean of each measure, ``dPSNR vs minterpolate`` and ``dPSNR vs naive`` (the
+    the mean of each measure and the mean PSNR of the worst 10 % of the cases
+    (:func:`worst_decile`), ``dPSNR vs minterpolate`` and ``dPSNR vs naive`` (the
     mean over the cases of the method's PSNR minus the reference's; "-" when the
     reference did not run), ``wins vs minterpolate`` (cases with a strictly higher
-    PSNR than minterpolate, of those both ran) and the median seconds per frame.
-    Then the timing table (:func:`format_timing_table`) when ``timing`` is given.
+    PSNR than minterpolate, of those both ran) and the median seconds per frame;
+    after the set's summary, the cases each varflow method loses against
+    minterpolate (when both ran).  Then the timing table
+    (:func:`format_timing_table`) when ``timing`` is given.
 
     Parameters
     ----------
@@ -667,6 +698,10 @@ def format_tables(rows: Sequence[Mapping[str, Any]],
         if per_case:
             parts.append(f"{title}, per case\n\n{_case_table(group)}")
         parts.append(f"{title}, means\n\n{_summary_table(group)}")
+        if any(str(r["method"]) == BASELINE_PEER for r in group) and any(
+                r.get("kind") == "varflow" for r in group):
+            parts.append(f"{title}, cases lost against {BASELINE_PEER} (PSNR of the "
+                         f"method / {BASELINE_PEER})\n\n{_losses(group)}")
         times = sorted({t for t in (_val(r, "t") for r in group) if math.isfinite(t)})
         if len(times) > 1:  # one summary per time (the x4 protocol)
             for t in times:
