@@ -16,7 +16,7 @@ Synopsis::
                              [--refs 5 6 ...] [--windows 9 13 19] [--no-whole]
                              [--crop Y0 Y1 X0 X1] [--no-rubberwhale] [--csv OUT.csv]
                              [--quiet] [--<parameter> VALUE ...]
-    varflow bench interpolation [--sets middlebury,ucf101,sintel]
+    varflow bench interpolation [--sets middlebury,ucf101,sintel,sintel-x4]
                              [--split tuning|reporting|all] [--methods naive,...]
                              [--peers minterpolate,blend,repeat|all|none] [--max-cases N]
                              [--timing|--no-timing] [--timing-only] [--timing-repeats N]
