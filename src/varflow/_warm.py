@@ -4,7 +4,8 @@ A method's first run on a machine compiles its Numba kernels one after the other
 one core, in the order the run first calls them (:mod:`varflow._jit`).  For ``tvl1``
 the kernels of the filters after a warp (the 5 × 5 median, the flow-edge mask, the
 weighted median), the dual projection of a new level and the gradient-constancy
-channels come after the others and make up about two fifths of the compile time.
+channels with their smoothing come after the others and make up about two fifths of
+the compile time.
 :func:`start` launches ``python -m varflow._warm`` to compile those into Numba's
 cache on another core; by the time the run reaches them it loads them from the
 cache.  Nothing is shared but the cache, whose files Numba writes atomically: if the
@@ -36,6 +37,7 @@ log = logging.getLogger(__name__)
 #: the method first needs them.
 LATE_KERNELS: dict[str, tuple[str, ...]] = {
     "tvl1": (
+        "varflow.ops.pyramid:_smooth_planar_kernel",
         "varflow.twoframe.tvl1:_gradient_channels_kernel",
         "varflow.ops.median:_median5_kernel",
         "varflow.ops.primal_dual:project_dual",
@@ -52,10 +54,13 @@ def _warm_tvl1() -> None:
     passes them."""
     from .ops.median import median_filter_flow, weighted_median_flow
     from .ops.primal_dual import project_dual
+    from .ops.pyramid import smooth_planes
     from .twoframe.tvl1 import _gradient_channels_kernel
 
     h, w, nc = 24, 32, 3
     f32 = np.float32
+    planes = np.zeros((h, w, 3 * nc), f32)  # the warped frame and its derivatives
+    smooth_planes(planes[..., nc:2 * nc], 1.0, out=np.empty((2 * nc, h, w), f32)[:nc])
     stack = np.zeros((2 * nc, h, w), f32)
     ix = np.zeros((3 * nc, h, w), f32)
     _gradient_channels_kernel(stack, stack.copy(), np.ones((h, w), np.bool_),
