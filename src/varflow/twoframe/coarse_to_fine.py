@@ -13,7 +13,10 @@ that minimises its energy linearised around ``flow0`` at one pyramid level;
 ``level``, ``warp`` (the index of the current warp, ``params.level_warps(shape)``
 warps per level) and ``previous`` (the coarser level's state), and ``data``, which
 the solver owns (its dual variables, edge weights…; ``state.previous.data`` warm
-starts them across levels).
+starts them across levels).  A solver whose kernels work on planar data sets the
+attribute ``solve_warp.planar_flow = True``: the driver then keeps the flows in planar
+memory and ``flow0`` is a ``(H, W, 2)`` view of it, which the solver and the filters
+read without transposing (:func:`run_levels`, ``planar``).
 
 The level and warp loop itself is :func:`run_levels`: it carries a stack of flows
 through the levels (upsampling between them), calls a per-level set-up and a
@@ -342,7 +345,8 @@ def coarse_to_fine_pyramids(
 
     def start_level(level: int, flows: np.ndarray, previous: LevelState | None) -> LevelState:
         if level_hook is not None:
-            flows[0] = level_hook(level, pyr0[level], pyr1[level], flows[0], stats)
+            flows[0] = level_hook(level, pyr0[level], pyr1[level],
+                                  np.ascontiguousarray(flows[0]), stats)
         planes[:] = [derivative_planes(pyr1[level])]
         return LevelState(level=level, stats=stats, previous=previous)
 
@@ -368,7 +372,8 @@ def coarse_to_fine_pyramids(
             callback(done, total)
 
     flows = run_levels(flows, shapes, params, start_level, warp_step,
-                       guide=guide if guide is not None else pyr0, tick=tick)
+                       guide=guide if guide is not None else pyr0, tick=tick,
+                       planar=getattr(solve_warp, "planar_flow", False))
     seconds = time.perf_counter() - t_start
     stats.update(levels=n_levels, warps=total, seconds=seconds)
     log.debug("coarse_to_fine: %d levels, %d warps in %.3fs", n_levels, total, seconds)
@@ -394,6 +399,7 @@ def run_levels(
     guide: list[np.ndarray] | None = None,
     active: list[int] | None = None,
     tick: Callable[[], None] | None = None,
+    planar: bool = False,
 ) -> np.ndarray:
     """The level and warp loop of coarse-to-fine warping, on a stack of flows.
 
@@ -430,19 +436,28 @@ def run_levels(
         zero displacement).
     tick : callable, optional
         Called after every warp.
+    planar : bool
+        Keep the flows in planar memory, ``(K, 2, h, w)`` behind the ``(K, h, w, 2)``
+        view that the steps see: solvers and filters that work on planar data then
+        read and write them without transposing (the result is the same).  For
+        steps whose kernels take any layout.  Default False.
 
     Returns
     -------
     ndarray, shape (K, H, W, 2), float32
-        The flows at the finest level run (``shapes[0]``).
+        The flows at the finest level run (``shapes[0]``); with ``planar`` a view of
+        planar memory.
     """
     flows = np.asarray(flows, np.float32)
+    if planar:
+        flows = _planar_stack(list(flows), flows.shape[1:3])
     rows = list(range(flows.shape[0])) if active is None else list(active)
     state: Any = None
     for level in range(len(shapes) - 1, -1, -1):
         shape = tuple(shapes[level])
         if flows.shape[1:3] != shape:
-            flows = np.stack([resize_flow(f, shape) for f in flows])
+            resized = [resize_flow(f, shape) for f in flows]
+            flows = _planar_stack(resized, shape) if planar else np.stack(resized)
         if state is not None and hasattr(state, "previous"):
             state.previous = None  # keep one level of history
         state = start_level(level, flows, state)
@@ -455,3 +470,13 @@ def run_levels(
             if tick is not None:
                 tick()
     return flows
+
+
+def _planar_stack(flows: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    """The ``(h, w, 2)`` flows as a ``(K, h, w, 2)`` view of new planar memory
+    ``(K, 2, h, w)``."""
+    store = np.empty((len(flows), 2) + tuple(shape), np.float32)
+    view = np.moveaxis(store, 1, -1)
+    for k, f in enumerate(flows):
+        view[k] = f
+    return view

@@ -136,3 +136,6 @@ def solve_warp(
     if st.g is None:
         init_tensor_level(I0, params, st)
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st, engine)
+
+
+solve_warp.planar_flow = True  # type: ignore[attr-defined]  # as tvl1's

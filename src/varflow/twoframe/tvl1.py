@@ -372,7 +372,8 @@ def linearise_numpy(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
 @nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
     """One task per channel and row: the row views let the loop run without a
-    per-pixel branch (the ``inside`` mask multiplies)."""
+    per-pixel branch (the ``inside`` mask multiplies).  ``flow0`` is planar
+    ``(2, H, W)``."""
     h, w, nc = I0.shape
     for task in nb.prange(nc * h):
         c = task // h
@@ -382,8 +383,8 @@ def _linearise_kernel(I0, I1w, I1w_dx, I1w_dy, inside, flow0, ix, iy, a):
         rx = I1w_dx[i, :, c]
         ry = I1w_dy[i, :, c]
         ins = inside[i]
-        u0 = flow0[i, :, 0]
-        v0 = flow0[i, :, 1]
+        u0 = flow0[0, i]
+        v0 = flow0[1, i]
         ox = ix[c, i]
         oy = iy[c, i]
         oa = a[c, i]
@@ -418,9 +419,9 @@ def linearise(I0, I1w, I1w_dx, I1w_dy, inside, flow0):
     ix = np.empty((nc, h, w), np.float32)
     iy = np.empty_like(ix)
     a = np.empty_like(ix)
-    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy, flow0)]
-    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], np.asarray(inside, np.bool_), f32[4],
-                      ix, iy, a)
+    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy)]
+    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], np.asarray(inside, np.bool_),
+                      planar(flow0), ix, iy, a)
     return ix, iy, a
 
 
@@ -469,15 +470,16 @@ def data_channels(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params: TVL1Params,
     ix = np.empty((n_k, h, w), np.float32)
     iy = np.empty_like(ix)
     a = np.empty_like(ix)
-    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy, flow0)]
+    f32 = [np.asarray(x, dtype=np.float32) for x in (I0, I1w, I1w_dx, I1w_dy)]
     inside = np.asarray(inside, np.bool_)
-    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], inside, f32[4], ix[:nc], iy[:nc], a[:nc])
+    fp = planar(flow0)  # free when the driver keeps its flows planar
+    _linearise_kernel(f32[0], f32[1], f32[2], f32[3], inside, fp, ix[:nc], iy[:nc], a[:nc])
     w_grad = np.float32(params.gradient_weight / params.data_weight)
     if params.gradient_weight > 0:
         gdx, gdy, w_grad = _gradient_inputs(f32[2], f32[3], params)
         sigma, i0 = _reference_gradients(f32[0], params, state)
         j1 = _smoothed_stack(gdx, gdy, sigma)
-        _gradient_channels_kernel(j1, i0, inside, planar(f32[4]), w_grad, nc, ix, iy, a)
+        _gradient_channels_kernel(j1, i0, inside, fp, w_grad, nc, ix, iy, a)
     if params.data_normalisation > 0:
         scale = _normalisation(ix, iy, nc, w_grad, params.data_normalisation)
         ix *= scale
@@ -751,6 +753,11 @@ def solve_warp(
         g = edge_weight(I0, params.edge_weight, params.edge_weight_min)
         init_level_state(st, I0.shape, g)
     return run_warp(I0, I1w, I1w_dx, I1w_dy, inside, flow0, params, st, engine)
+
+
+#: The driver may keep the flows planar (:func:`~varflow.twoframe.coarse_to_fine.run_levels`):
+#: the solver's kernels take planar data.
+solve_warp.planar_flow = True  # type: ignore[attr-defined]
 
 
 def tvl1(frame0, frame1, params: TVL1Params | None = None, init_flow=None, callback=None,
