@@ -48,7 +48,7 @@ bidirectional, with softmax splatting (Niklaus & Liu 2020) as its z-buffer:
    frames and ``f`` = :attr:`SplatParams.lost_fraction`, the frame fades toward the
    plain blend ``(1 − t) I0 + t I1`` with the weight ``clip(2 m / f − 1, 0, 1)``:
    untouched while a quarter of the pixels or fewer are lost at the default, the
-   blend where half are.  (On every pair of the interpolation sets at most 4 % of
+   blend where half are.  (On every pair of the interpolation sets at most 7 % of
    the pixels are lost; on two unrelated textures all are.)
 
 The motion (steps 1-2, the accelerations and the lost share) is estimated once per
@@ -256,15 +256,14 @@ class SplatMotion(PairMotion):
         self._unit = 1.0 if inside else 1.0 / max(float(self._hi - self._lo), 1e-12)
         self.hidden0 = hidden_mask(self.f01, self.f10, p.fb_tolerance, p.fb_relative)
         self.hidden1 = hidden_mask(self.f10, self.f01, p.fb_tolerance, p.fb_relative)
-        z0 = photometric_error(frame0, frame1, self.f01) * np.float32(self._unit)
-        z1 = photometric_error(frame1, frame0, self.f10) * np.float32(self._unit)
+        z0 = photometric_error(frame0, frame1, self.f01).astype(np.float64) * self._unit
+        z1 = photometric_error(frame1, frame0, self.f10).astype(np.float64) * self._unit
         self.importance0 = self._importance(z0, self.hidden0)
         self.importance1 = self._importance(z1, self.hidden1)
         self.lost = lost_share((z0, z1), p.lost_error)
 
     def _importance(self, error: np.ndarray, hidden: np.ndarray) -> np.ndarray:
-        cost = error.astype(np.float64)
-        cost += self.params.occlusion_cost * hidden
+        cost = error + self.params.occlusion_cost * hidden
         # float64: exp(-alpha Z) stays positive for any cost of interest (a landing
         # pixel counts as covered however costly; float32 underflows near exp(-103))
         return np.exp(-np.minimum(self.params.splat_sharpness * cost, 700.0))
@@ -345,7 +344,7 @@ def lost_share(errors: tuple[np.ndarray, ...], threshold: float) -> float:
 
     Parameters
     ----------
-    errors : tuple of ndarray, each (H, W) float32
+    errors : tuple of ndarray, each (H, W)
         The photometric errors ``Z`` of each frame's flow (intensity units).
     threshold : float
         τ_L (:attr:`SplatParams.lost_error`).
