@@ -729,8 +729,8 @@ def _cmd_bench_interpolation(args: argparse.Namespace) -> int:
     names = ", ".join(methods + peers)
     rows: list[dict[str, Any]] = []
     if not args.timing_only:
-        print(f"Frame interpolation ({', '.join(sets)}; {args.split} split; t = 0.5, "
-              f"sintel-x4 1/4, 1/2, 3/4"
+        times = "t = 0.5" + (", sintel-x4 1/4, 1/2, 3/4" if "sintel-x4" in sets else "")
+        print(f"Frame interpolation ({', '.join(sets)}; {args.split} split; {times}"
               + (f", first {args.max_cases} cases per set" if args.max_cases else "")
               + f"): {names}.  PSNR (dB, RGB) and SSIM (Gaussian 11x11, sigma 1.5, mean "
               f"over channels) on 0-255; IE: Baker et al. RMS colour error, NE: IE with "

@@ -586,10 +586,8 @@ def _summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
     def wins(m: str) -> str:
         if BASELINE_PEER not in methods or m == BASELINE_PEER:
             return "-"
-        both = [(_val(cell.get((c, m)), "psnr"), _val(cell.get((c, BASELINE_PEER)), "psnr"))
-                for c in cases]
-        both = [(a, b) for a, b in both if not (math.isnan(a) or math.isnan(b))]
-        return f"{sum(a > b for a, b in both)}/{len(both)}"
+        both = _against_baseline(cell, cases, m)
+        return f"{sum(a > b for _, a, b in both)}/{len(both)}"
 
     header = (["method", "n", "PSNR", "worst 10 %"] + [h for _, h, _ in _MEASURES[1:]]
               + [f"dPSNR vs {BASELINE_PEER}", f"dPSNR vs {BASELINE_METHOD}",
@@ -617,6 +615,18 @@ def worst_decile(values: Sequence[float]) -> float:
     return float(np.mean(finite[:k]))
 
 
+def _against_baseline(cell: Mapping[tuple[str, str], Mapping[str, Any]],
+                      cases: Sequence[str], method: str) -> list[tuple[str, float, float]]:
+    """``(case, PSNR of method, PSNR of the baseline peer)`` for the cases where both
+    ran (``cell`` keyed by ``(case, method)``)."""
+    out = []
+    for c in cases:
+        a, b = _val(cell.get((c, method)), "psnr"), _val(cell.get((c, BASELINE_PEER)), "psnr")
+        if not (math.isnan(a) or math.isnan(b)):
+            out.append((c, a, b))
+    return out
+
+
 def _losses(rows: Sequence[Mapping[str, Any]]) -> str:
     """The cases each varflow method loses against the baseline peer (its PSNR not
     above the peer's): one line per method, ``case (method / peer dB)``."""
@@ -624,11 +634,8 @@ def _losses(rows: Sequence[Mapping[str, Any]]) -> str:
     cases = list(dict.fromkeys(str(r["case"]) for r in rows))
     lines = []
     for m in dict.fromkeys(str(r["method"]) for r in rows if r.get("kind") == "varflow"):
-        lost = []
-        for c in cases:
-            a, b = _val(cell.get((c, m)), "psnr"), _val(cell.get((c, BASELINE_PEER)), "psnr")
-            if math.isfinite(a) and math.isfinite(b) and not a > b:
-                lost.append(f"{c} ({a:.2f} / {b:.2f})")
+        lost = [f"{c} ({a:.2f} / {b:.2f})" for c, a, b in _against_baseline(cell, cases, m)
+                if not a > b]
         lines.append(f"- `{m}`: {', '.join(lost) if lost else 'none'}")
     return "\n".join(lines)
 
