@@ -76,52 +76,54 @@ def _rof_kernel(f, theta, sched, u, ubar, px, py):
         rel = sched[it, 2]
         a = tau / theta
         inv = _F1 / (_F1 + a)
-        for r in nb.prange(k * h):
-            c = r // h
-            i = r - c * h
-            ub = ubar[c, i]
-            ubn = ubar[c, min(i + 1, h - 1)]
-            cy = sigma if i < h - 1 else np.float32(0.0)
-            pxr = px[c, i]
-            pyr = py[c, i]
-            ub1 = ub[1:]
-            for j in range(w - 1):
-                qx = pxr[j] + sigma * (ub1[j] - ub[j])
-                qy = pyr[j] + cy * (ubn[j] - ub[j])
-                s = _F1 / max(_F1, math.sqrt(qx * qx + qy * qy))
-                pxr[j] = qx * s
-                pyr[j] = qy * s
-            qy = pyr[w - 1] + cy * (ubn[w - 1] - ub[w - 1])
-            pyr[w - 1] = qy / max(_F1, abs(qy))
-        for r in nb.prange(k * h):
-            c = r // h
-            i = r - c * h
-            pxr = px[c, i]
-            pyc = py[c, i]
-            pym = py[c, max(i - 1, 0)]
-            cm = _F1 if i > 0 else np.float32(0.0)
-            ur = u[c, i]
-            ubr = ubar[c, i]
-            fr = f[c, i]
-            # j = 0: no left neighbour
-            d = pxr[0] + pyc[0] - cm * pym[0]
-            uo = ur[0]
-            un = (uo + tau * d + a * fr[0]) * inv
-            ur[0] = un
-            ubr[0] = un + rel * (un - uo)
-            pxl = pxr[: w - 1]
-            pxc = pxr[1:]
-            pyc1 = pyc[1:]
-            pym1 = pym[1:]
-            ur1 = ur[1:]
-            ubr1 = ubr[1:]
-            fr1 = fr[1:]
-            for jj in range(w - 1):
-                d = pxc[jj] - pxl[jj] + pyc1[jj] - cm * pym1[jj]
-                uo = ur1[jj]
-                un = (uo + tau * d + a * fr1[jj]) * inv
-                ur1[jj] = un
-                ubr1[jj] = un + rel * (un - uo)
+        # phase 0 the dual step, phase 1 the primal step (one parallel loop, one
+        # gufunc to compile; the phases are separated by the loop's barrier)
+        for phase in range(2):
+            for r in nb.prange(k * h):
+                c = r // h
+                i = r - c * h
+                if phase == 0:
+                    ub = ubar[c, i]
+                    ubn = ubar[c, min(i + 1, h - 1)]
+                    cy = sigma if i < h - 1 else np.float32(0.0)
+                    pxr = px[c, i]
+                    pyr = py[c, i]
+                    ub1 = ub[1:]
+                    for j in range(w - 1):
+                        qx = pxr[j] + sigma * (ub1[j] - ub[j])
+                        qy = pyr[j] + cy * (ubn[j] - ub[j])
+                        s = _F1 / max(_F1, math.sqrt(qx * qx + qy * qy))
+                        pxr[j] = qx * s
+                        pyr[j] = qy * s
+                    qy = pyr[w - 1] + cy * (ubn[w - 1] - ub[w - 1])
+                    pyr[w - 1] = qy / max(_F1, abs(qy))
+                else:
+                    pxr = px[c, i]
+                    pyc = py[c, i]
+                    pym = py[c, max(i - 1, 0)]
+                    cm = _F1 if i > 0 else np.float32(0.0)
+                    ur = u[c, i]
+                    ubr = ubar[c, i]
+                    fr = f[c, i]
+                    # j = 0: no left neighbour
+                    d = pxr[0] + pyc[0] - cm * pym[0]
+                    uo = ur[0]
+                    un = (uo + tau * d + a * fr[0]) * inv
+                    ur[0] = un
+                    ubr[0] = un + rel * (un - uo)
+                    pxl = pxr[: w - 1]
+                    pxc = pxr[1:]
+                    pyc1 = pyc[1:]
+                    pym1 = pym[1:]
+                    ur1 = ur[1:]
+                    ubr1 = ubr[1:]
+                    fr1 = fr[1:]
+                    for jj in range(w - 1):
+                        d = pxc[jj] - pxl[jj] + pyc1[jj] - cm * pym1[jj]
+                        uo = ur1[jj]
+                        un = (uo + tau * d + a * fr1[jj]) * inv
+                        ur1[jj] = un
+                        ubr1[jj] = un + rel * (un - uo)
 
 
 def rof_denoise(f: np.ndarray, theta: float = 0.125, n_iter: int = 50) -> np.ndarray:

@@ -225,44 +225,45 @@ def tvl1_iterations(
     while it < max_iter:
         two = max_iter - it >= 2  # else one last iteration: the wavefront without B
         it += 2 if two else 1
-        # the wavefront: iteration A at rows i (primal) and i - 1 (dual), iteration B
-        # at i - 1 (primal) and i - 2 (dual); B's primal at the block's first row and
-        # everything that needs the next block's rows is left to the passes below
-        for b in nb.prange(n_blk):
-            r0 = blocks[b]
-            r1 = blocks[b + 1]
-            d1 = buf[b, 0]
-            d2 = buf[b, 1]
-            for i in range(r0, r1):
-                err = prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta, n_sweeps)
-                if not two:
-                    errs[i] = err
-                if i > r0:
-                    dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
-                if two and i - 1 > r0:
-                    errs[i - 1] = prox_primal_row(ix, iy, a, q, u, tp, i - 1, d1, d2, t,
-                                                   theta, n_sweeps)
-                if two and i - 2 > r0:
-                    dual_row(u, p, tp, g, tens, i - 2, step, aniso, huber)
-        for b in nb.prange(n_blk):  # A: dual of the last row (next block's first u)
-            dual_row(u, p, tp, g, tens, blocks[b + 1] - 1, step, aniso, huber)
-        if two:
-            for b in nb.prange(n_blk):  # B: primal of the first and last rows
+        # phase 0, the wavefront: iteration A at rows i (primal) and i - 1 (dual),
+        # iteration B at i - 1 (primal) and i - 2 (dual); B's primal at the block's
+        # first row and everything that needs the next block's rows is left to the
+        # phases after it: 1, A's dual of the last row (next block's first u); 2, B's
+        # primal of the first and last rows; 3, B's duals left.  One parallel loop
+        # serves the four phases (one gufunc to compile; each phase ends in a barrier)
+        for phase in range(4 if two else 2):
+            for b in nb.prange(n_blk):
                 r0 = blocks[b]
                 r1 = blocks[b + 1]
-                errs[r0] = prox_primal_row(ix, iy, a, q, u, tp, r0, buf[b, 0], buf[b, 1], t,
-                                            theta, n_sweeps)
-                if r1 - 1 > r0:
-                    errs[r1 - 1] = prox_primal_row(ix, iy, a, q, u, tp, r1 - 1, buf[b, 0],
-                                                    buf[b, 1], t, theta, n_sweeps)
-            for b in nb.prange(n_blk):  # B: the duals left
-                r0 = blocks[b]
-                r1 = blocks[b + 1]
-                dual_row(u, p, tp, g, tens, r0, step, aniso, huber)
-                if r1 - 2 > r0:
-                    dual_row(u, p, tp, g, tens, r1 - 2, step, aniso, huber)
-                if r1 - 1 > r0:
+                d1 = buf[b, 0]
+                d2 = buf[b, 1]
+                if phase == 0:
+                    for i in range(r0, r1):
+                        err = prox_primal_row(ix, iy, a, q, u, tp, i, d1, d2, t, theta,
+                                              n_sweeps)
+                        if not two:
+                            errs[i] = err
+                        if i > r0:
+                            dual_row(u, p, tp, g, tens, i - 1, step, aniso, huber)
+                        if two and i - 1 > r0:
+                            errs[i - 1] = prox_primal_row(ix, iy, a, q, u, tp, i - 1, d1, d2,
+                                                           t, theta, n_sweeps)
+                        if two and i - 2 > r0:
+                            dual_row(u, p, tp, g, tens, i - 2, step, aniso, huber)
+                elif phase == 1:
                     dual_row(u, p, tp, g, tens, r1 - 1, step, aniso, huber)
+                elif phase == 2:
+                    errs[r0] = prox_primal_row(ix, iy, a, q, u, tp, r0, d1, d2, t, theta,
+                                               n_sweeps)
+                    if r1 - 1 > r0:
+                        errs[r1 - 1] = prox_primal_row(ix, iy, a, q, u, tp, r1 - 1, d1, d2,
+                                                       t, theta, n_sweeps)
+                else:
+                    dual_row(u, p, tp, g, tens, r0, step, aniso, huber)
+                    if r1 - 2 > r0:
+                        dual_row(u, p, tp, g, tens, r1 - 2, step, aniso, huber)
+                    if r1 - 1 > r0:
+                        dual_row(u, p, tp, g, tens, r1 - 1, step, aniso, huber)
         if ordered_sum(errs) / (h * w) < tol2:
             break
     return it
