@@ -12,6 +12,7 @@ import importlib
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -63,6 +64,7 @@ def test_no_helper_when_it_cannot_help(monkeypatch: pytest.MonkeyPatch) -> None:
     from varflow import _jit
 
     started = []
+    monkeypatch.setattr(_warm, "_active", None)  # start() records its fake helper there
     monkeypatch.setattr(_warm.subprocess, "Popen",
                         lambda *a, **k: started.append(a) or SimpleNamespace(pid=0))
     monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: True)
@@ -98,3 +100,47 @@ def test_helper_fills_an_empty_cache(tmp_path: Path) -> None:
     after = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
                            env=env, timeout=300)
     assert after.stdout.strip() == "True", after.stderr
+
+
+def test_await_kernel_waits_for_the_helper_only_while_it_can_help(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from varflow import _jit
+
+    spec = "varflow.ops.median:_weighted_median_kernel"
+    monkeypatch.setattr(_warm, "_active", None)
+    assert _warm.await_kernel(spec, timeout=5.0) is False  # no helper: at once
+
+    polls = []
+
+    def cached_on_third(method=None, kernels=None):
+        polls.append(kernels)
+        return len(polls) >= 3
+
+    monkeypatch.setattr(_jit, "kernels_cached", cached_on_third)
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        monkeypatch.setattr(_warm, "_active", (sleeper, _warm.LATE_KERNELS["tvl1"]))
+        assert _warm.await_kernel("varflow.ops.rof:_rof_kernel", timeout=5.0) is False
+        assert polls == []  # not one of the helper's kernels: no wait
+        assert _warm.await_kernel(spec, timeout=5.0, poll=0.01) is True
+        assert len(polls) == 3 and polls[0] == (spec,)
+        # never cached: gives up after the timeout, the run compiles it itself
+        monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: False)
+        t0 = time.monotonic()
+        assert _warm.await_kernel(spec, timeout=0.3, poll=0.01) is False
+        assert 0.3 <= time.monotonic() - t0 < 5.0
+        # cannot tell: no wait
+        monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: None)
+        assert _warm.await_kernel(spec, timeout=5.0) is False
+        monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: False)
+        _warm.finish(sleeper, timeout=0.1)  # stops it and forgets it
+        assert _warm._active is None
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    done = subprocess.Popen([sys.executable, "-c", "pass"])
+    done.wait()
+    monkeypatch.setattr(_warm, "_active", (done, _warm.LATE_KERNELS["tvl1"]))
+    t0 = time.monotonic()
+    assert _warm.await_kernel(spec, timeout=5.0) is False  # the helper has exited
+    assert time.monotonic() - t0 < 1.0
