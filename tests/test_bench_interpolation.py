@@ -216,6 +216,36 @@ def test_context_methods_get_the_neighbours(fake_root: Path, monkeypatch) -> Non
                                                                abs=0.05)
 
 
+def test_x4_groups_estimate_their_motion_once(fake_root: Path, monkeypatch) -> None:
+    # the three times between one pair share the pair's flows (a FlowCache per method),
+    # with the same frames as when every case estimates its own
+    from varflow.twoframe import methods as tm
+
+    calls: list[tuple[int, ...]] = []
+    real = tm.run_method
+
+    def counting(m, a, b, *args, **kwargs):
+        calls.append(a.shape)
+        return real(m, a, b, *args, **kwargs)
+
+    monkeypatch.setattr(tm, "run_method", counting)
+
+    def run() -> list[dict]:
+        return bi.run_interpolation_bench(["sintel-x4"], "all", ["naive"], "none",
+                                          root=fake_root, max_cases=3, progress=False,
+                                          warm_up=False)
+
+    shared = run()
+    assert len(calls) == 2  # F01 and F10 of frames 1 -> 5, once for t = 1/4, 1/2, 3/4
+    calls.clear()
+    monkeypatch.setattr(bi, "SHARED_MOTION_SETS", frozenset())
+    alone = run()
+    assert len(calls) == 6
+    assert [r["t"] for r in shared] == [0.25, 0.5, 0.75]
+    assert [r["psnr"] for r in shared] == [r["psnr"] for r in alone]
+    assert len({r["psnr"] for r in shared}) == 3  # three different frames
+
+
 def test_format_tables_gains_and_wins() -> None:
     def row(case: str, method: str, p: float) -> dict:
         return {"set": "ucf101", "split": "reporting", "case": case, "method": method,

@@ -193,15 +193,24 @@ def _warm_up_method(method: str, params: Any) -> None:
                 following=np.roll(f0, 2, axis=1))
 
 
+#: Sets whose consecutive cases are frames between one pair (``sintel-x4``: t = 1/4,
+#: 1/2, 3/4 between frames c - 2 and c + 2): a method estimates the pair's motion once
+#: for all of them through a :class:`~varflow.retime.motion.FlowCache`, as
+#: ``varflow retime`` does.
+SHARED_MOTION_SETS = frozenset({"sintel-x4"})
+
+
 def _run_one(name: str, kind: str, frames: Any, t: float, params: Any,
-             use_context: bool) -> tuple[np.ndarray, float]:
-    """One interpolated frame and its wall time."""
+             use_context: bool, flow_cache: Any = None) -> tuple[np.ndarray, float]:
+    """One interpolated frame and its wall time (``flow_cache``: the flows are looked
+    up and kept there)."""
     from ...retime.methods import interpolate
 
     t0 = time.perf_counter()
     if kind == "varflow":
         ctx = {"previous": frames.previous, "following": frames.following} if use_context else {}
-        est = interpolate(frames.frame0, frames.frame1, t, name, params=params, **ctx)
+        est = interpolate(frames.frame0, frames.frame1, t, name, params=params,
+                          flow_cache=flow_cache, **ctx)
     else:
         est = INTERPOLATION_PEERS[name](frames.frame0, frames.frame1, t)
     return est, time.perf_counter() - t0
@@ -253,7 +262,9 @@ def run_interpolation_bench(
         or ``"peer"``), ``context`` (how many of
         ``previous`` / ``following`` the method was given), ``psnr`` (dB),
         ``ssim``, ``ie``, ``ne``, ``mae`` (0-255 units) and ``seconds`` (wall time
-        of the one frame, reading excluded).
+        of the one frame, reading excluded; in the sets of
+        :data:`SHARED_MOTION_SETS` the first frame between a pair includes the
+        flows that the next ones reuse).
 
     Raises
     ------
@@ -266,6 +277,7 @@ def run_interpolation_bench(
     from tqdm import tqdm
 
     from ...retime.methods import get_interpolator
+    from ...retime.motion import FlowCache
 
     sets_ = check_sets(list(sets) if not isinstance(sets, str) else sets)
     check_split(split)
@@ -282,6 +294,7 @@ def run_interpolation_bench(
             _warm_up_method(m, params[m])
 
     runners = [(m, "varflow") for m in names] + [(p, "peer") for p in peer_names]
+    caches = {m: FlowCache() for m in names}  # for SHARED_MOTION_SETS only
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=len(cases) * len(runners), desc="interpolation", unit="frame",
                file=sys.stderr, disable=None if progress else True, leave=False)
@@ -291,8 +304,9 @@ def run_interpolation_bench(
             for name, kind in runners:
                 bar.set_postfix_str(f"{case.set} {case.name} {name}")
                 use_context = kind == "varflow" and get_interpolator(name).context >= 1
+                cache = caches.get(name) if case.set in SHARED_MOTION_SETS else None
                 est, seconds = _run_one(name, kind, frames, case.t, params.get(name),
-                                        use_context)
+                                        use_context, cache)
                 scores = frame_scores(est, frames.gt)
                 n_ctx = sum(f is not None for f in (frames.previous, frames.following))
                 row = {"set": case.set, "split": case.split, "case": case.name,
