@@ -249,7 +249,8 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
         bases: dict = {}  # the basis of a level, found at its first warp
 
         def lstep(traj: np.ndarray, visible: np.ndarray | None) -> np.ndarray:
-            umat = trajectories_to_matrix(traj) * row_w
+            umat = trajectories_to_matrix(traj)  # a copy: scaled in place
+            umat *= row_w
             kw: dict = {}
             level = traj.shape[1:3]
             if params.lowrank_method == "linear":
@@ -273,7 +274,8 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
             ranks.append(int(info.get("rank", -1)))
             if "basis" in info and info["rank"] > 0:
                 bases[level] = info["basis"]
-            out = matrix_to_trajectories(lm / row_w, traj.shape[1], traj.shape[2])
+            lm = np.divide(lm, row_w, out=lm if lm.dtype == row_w.dtype else None)
+            out = matrix_to_trajectories(lm, traj.shape[1], traj.shape[2])
             out[ref] = 0.0
             return out
 
