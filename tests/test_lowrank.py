@@ -159,6 +159,16 @@ def test_rpca_linear_seeding_and_warm_start():
     assert ic["n_samples"] == 500
 
 
+def test_rpca_linear_without_the_residual_returns_the_same_low_rank_part():
+    u, l0, _ = _planted(n=2000, seed=12)
+    L, S, _ = rpca_linear(u, seed=3)
+    Ln, none, info = rpca_linear(u, seed=3, residual=False)
+    assert none is None and info["rank"] == RANK
+    np.testing.assert_array_equal(L, Ln)
+    np.testing.assert_array_equal(S, u - L)
+    assert _rel(Ln, l0) < 1e-3
+
+
 def test_rpca_linear_zero_matrix():
     L, S, info = rpca_linear(np.zeros((8, 50)))
     assert L.dtype == np.float64 and not L.any() and not S.any() and info["rank"] == 0

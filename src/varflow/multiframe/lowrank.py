@@ -772,7 +772,8 @@ def rpca_linear(
     rho: float = 1.2,
     l1_rho: float = 1.5,
     engine: Literal["numba", "numpy"] = "numba",
-) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    residual: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
     """Principal component pursuit in linear time by l1 filtering (Liu et al. 2016).
 
     1. *Seed.*  Draw ``s = n_samples`` distinct columns at random (local
@@ -838,13 +839,16 @@ def rpca_linear(
         μ growth factor of the L1 regression (see :func:`l1_regression`).
     engine : {"numba", "numpy"}
         Kernel of the l1 filtering.
+    residual : bool
+        Return ``S``; False returns None in its place (a caller that needs only
+        ``L`` saves a matrix of U's size).  Default True.
 
     Returns
     -------
     L : ndarray, shape (m, n)
         Low-rank part; float64 if ``U`` is float64, else float32.
-    S : ndarray, shape (m, n)
-        ``U − L``, same dtype.
+    S : ndarray, shape (m, n), or None
+        ``U − L``, same dtype (None when ``residual`` is False).
     info : dict
         ``basis`` (m, r) float64 orthonormal, ``rank``, ``n_samples``, ``columns``
         (sampled indices, None on warm start), ``lam``, ``lam_sample``,
@@ -908,7 +912,7 @@ def rpca_linear(
         L, l1 = solver(arr, q, weights=wts, tol=l1_tol, rho=l1_rho, max_iter=l1_max_iter)
         info.update(l1_iterations_mean=l1["iterations_mean"],
                     l1_iterations_max=l1["iterations_max"], l1_unconverged=l1["unconverged"])
-    return L, arr - L, info
+    return L, (arr - L if residual else None), info
 
 
 # ------------------------------------------------------------------------ the L-step

@@ -254,7 +254,7 @@ def track_rlr(frames: np.ndarray, ref: int, params: RLRParams,
             kw: dict = {}
             level = traj.shape[1:3]
             if params.lowrank_method == "linear":
-                kw = {"seed": params.seed, "rank_tol": params.rank_tol,
+                kw = {"seed": params.seed, "rank_tol": params.rank_tol, "residual": False,
                       "l1_tol": params.lowrank_tolerance,
                       "strata": params.lowrank_strata, "rank_rule": params.rank_rule}
                 if params.lowrank_samples:

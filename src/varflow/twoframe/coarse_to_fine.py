@@ -456,8 +456,7 @@ def run_levels(
     for level in range(len(shapes) - 1, -1, -1):
         shape = tuple(shapes[level])
         if flows.shape[1:3] != shape:
-            resized = [resize_flow(f, shape) for f in flows]
-            flows = _planar_stack(resized, shape) if planar else np.stack(resized)
+            flows = _resize_stack(flows, shape, planar)
         if state is not None and hasattr(state, "previous"):
             state.previous = None  # keep one level of history
         state = start_level(level, flows, state)
@@ -479,4 +478,24 @@ def _planar_stack(flows: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray
     view = np.moveaxis(store, 1, -1)
     for k, f in enumerate(flows):
         view[k] = f
+    return view
+
+
+def _resize_stack(flows: np.ndarray, shape: tuple[int, ...], planar: bool) -> np.ndarray:
+    """The ``(K, h, w, 2)`` flows resized to ``shape`` (:func:`resize_flow`), into
+    new memory resized one at a time (no list of K resized flows beside the stack):
+    planar ``(K, 2, h, w)`` seen as ``(K, h, w, 2)`` when ``planar``, else
+    ``(K, h, w, 2)``."""
+    n = len(flows)
+    if n == 0:
+        return np.empty((0,) + tuple(shape) + (2,), np.float32)
+    if planar:
+        view = np.moveaxis(np.empty((n, 2) + tuple(shape), np.float32), 1, -1)
+    else:
+        view = None
+    for k, f in enumerate(flows):
+        r = resize_flow(f, shape)
+        if view is None:
+            view = np.empty((n,) + r.shape, r.dtype)
+        view[k] = r
     return view
