@@ -64,7 +64,7 @@ def test_no_helper_when_it_cannot_help(monkeypatch: pytest.MonkeyPatch) -> None:
     from varflow import _jit
 
     started = []
-    monkeypatch.setattr(_warm, "_active", None)  # start() records its fake helper there
+    monkeypatch.setattr(_jit, "_helper", None)  # start() records its fake helper there
     monkeypatch.setattr(_warm.subprocess, "Popen",
                         lambda *a, **k: started.append(a) or SimpleNamespace(pid=0))
     monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: True)
@@ -107,8 +107,8 @@ def test_await_kernel_waits_for_the_helper_only_while_it_can_help(
     from varflow import _jit
 
     spec = "varflow.ops.median:_weighted_median_kernel"
-    monkeypatch.setattr(_warm, "_active", None)
-    assert _warm.await_kernel(spec, timeout=5.0) is False  # no helper: at once
+    monkeypatch.setattr(_jit, "_helper", None)
+    assert _jit.await_kernel(spec, timeout=5.0) is False  # no helper: at once
 
     polls = []
 
@@ -119,28 +119,30 @@ def test_await_kernel_waits_for_the_helper_only_while_it_can_help(
     monkeypatch.setattr(_jit, "kernels_cached", cached_on_third)
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     try:
-        monkeypatch.setattr(_warm, "_active", (sleeper, _warm.LATE_KERNELS["tvl1"]))
-        assert _warm.await_kernel("varflow.ops.rof:_rof_kernel", timeout=5.0) is False
+        _jit.set_helper(sleeper, _warm.LATE_KERNELS["tvl1"])
+        assert _jit.await_kernel("varflow.ops.rof:_rof_kernel", timeout=5.0) is False
         assert polls == []  # not one of the helper's kernels: no wait
-        assert _warm.await_kernel(spec, timeout=5.0, poll=0.01) is True
+        assert _jit.await_kernel(spec, timeout=5.0, poll=0.01) is True
         assert len(polls) == 3 and polls[0] == (spec,)
         # never cached: gives up after the timeout, the run compiles it itself
         monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: False)
         t0 = time.monotonic()
-        assert _warm.await_kernel(spec, timeout=0.3, poll=0.01) is False
+        assert _jit.await_kernel(spec, timeout=0.3, poll=0.01) is False
         assert 0.3 <= time.monotonic() - t0 < 5.0
         # cannot tell: no wait
         monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: None)
-        assert _warm.await_kernel(spec, timeout=5.0) is False
+        assert _jit.await_kernel(spec, timeout=5.0) is False
         monkeypatch.setattr(_jit, "kernels_cached", lambda method=None, kernels=None: False)
+        _jit.clear_helper(object())  # another process: kept
+        assert _jit._helper is not None
         _warm.finish(sleeper, timeout=0.1)  # stops it and forgets it
-        assert _warm._active is None
+        assert _jit._helper is None
     finally:
         sleeper.kill()
         sleeper.wait()
     done = subprocess.Popen([sys.executable, "-c", "pass"])
     done.wait()
-    monkeypatch.setattr(_warm, "_active", (done, _warm.LATE_KERNELS["tvl1"]))
+    _jit.set_helper(done, _warm.LATE_KERNELS["tvl1"])
     t0 = time.monotonic()
-    assert _warm.await_kernel(spec, timeout=5.0) is False  # the helper has exited
+    assert _jit.await_kernel(spec, timeout=5.0) is False  # the helper has exited
     assert time.monotonic() - t0 < 1.0

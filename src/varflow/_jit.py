@@ -16,11 +16,13 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import time
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["FASTMATH", "FASTMATH_NAN", "FASTMATH_NO_REASSOC", "compile_seconds",
-           "kernels_cached", "method_kernels"]
+__all__ = ["AWAIT_SECONDS", "FASTMATH", "FASTMATH_NAN", "FASTMATH_NO_REASSOC",
+           "await_kernel", "clear_helper", "compile_seconds", "kernels_cached",
+           "method_kernels", "set_helper"]
 
 log = logging.getLogger(__name__)
 
@@ -120,3 +122,55 @@ def kernels_cached(method: str | None = None,
     if any(a is None for a in answers):
         return None
     return all(answers)
+
+
+#: The longest :func:`await_kernel` waits for the helper, seconds: about what the
+#: weighted median's kernel takes to compile here, so that a helper far behind costs
+#: the run at most one more compilation's time.
+AWAIT_SECONDS = 5.0
+
+#: The warm-up helper this process started (:func:`varflow._warm.start`) and has not
+#: finished: its process (a ``subprocess.Popen``) and the kernels it compiles.
+_helper: tuple[Any, tuple[str, ...]] | None = None
+
+
+def set_helper(proc: Any, kernels: Sequence[str]) -> None:
+    """Record ``proc`` as this process's warm-up helper, compiling ``kernels``."""
+    global _helper
+    _helper = (proc, tuple(kernels))
+
+
+def clear_helper(proc: Any) -> None:
+    """Forget the helper ``proc`` (when it is the recorded one)."""
+    global _helper
+    if _helper is not None and _helper[0] is proc:
+        _helper = None
+
+
+def await_kernel(spec: str, timeout: float = AWAIT_SECONDS, poll: float = 0.05) -> bool:
+    """Before the first call of kernel ``spec`` (``"module:function"``): if this
+    process's warm-up helper is to compile it and is still running, wait until the
+    kernel is in Numba's cache, the helper exits or ``timeout`` seconds pass.
+
+    A first ``tvl1`` run reaches the weighted median a second or two before the
+    helper has it: compiling it in the run as well would cost four.  Without a
+    helper, or for a kernel it does not compile, returns at once.  Only the time
+    changes: the run then loads the kernel or compiles it as it would have.
+
+    Returns
+    -------
+    bool
+        True when the kernel is in the cache after the wait.
+    """
+    helper = _helper
+    if helper is None or spec not in helper[1]:
+        return False
+    proc = helper[0]
+    deadline = time.monotonic() + timeout
+    while True:
+        cached = kernels_cached(kernels=(spec,))
+        if cached is not False:  # in the cache, or cannot tell: no use waiting
+            return bool(cached)
+        if proc.poll() is not None or time.monotonic() >= deadline:
+            return False
+        time.sleep(poll)

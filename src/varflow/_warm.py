@@ -24,14 +24,14 @@ import logging
 import os
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 
 import numba
 import numpy as np
 
-__all__ = ["AWAIT_SECONDS", "LATE_KERNELS", "await_kernel", "beside", "finish", "start",
-           "warm_up"]
+from ._jit import clear_helper, set_helper
+
+__all__ = ["LATE_KERNELS", "beside", "finish", "start", "warm_up"]
 
 log = logging.getLogger(__name__)
 
@@ -77,16 +77,6 @@ def _warm_tvl1() -> None:
 
 _WARMERS: dict[str, Callable[[], None]] = {"tvl1": _warm_tvl1}
 
-#: The longest :func:`await_kernel` waits for the helper, seconds: about what the
-#: weighted median's kernel takes to compile here, so that a helper far behind costs
-#: the run at most one more compilation's time.
-AWAIT_SECONDS = 5.0
-
-#: The helper this process started (:func:`start`) and has not yet finished, with the
-#: kernels it compiles.
-_active: tuple[subprocess.Popen, tuple[str, ...]] | None = None
-
-
 def warm_up(method: str) -> None:
     """Compile (or load) the late kernels of ``method`` in this process.
 
@@ -124,40 +114,8 @@ def start(method: str) -> subprocess.Popen | None:
         log.debug("warm-up helper not started: %s", exc)
         return None
     log.debug("warm-up helper %d compiling the late kernels of %s", proc.pid, method)
-    global _active
-    _active = (proc, LATE_KERNELS[method])
+    set_helper(proc, LATE_KERNELS[method])  # the run may wait for it (await_kernel)
     return proc
-
-
-def await_kernel(spec: str, timeout: float = AWAIT_SECONDS, poll: float = 0.05) -> bool:
-    """Before the first call of kernel ``spec`` (``"module:function"``): if this
-    process's helper is to compile it and is still running, wait until the kernel is
-    in Numba's cache, the helper exits or ``timeout`` seconds pass.
-
-    The run reaches the weighted median a second or two before the helper has it:
-    compiling it in the run as well would cost four.  Without a helper, or for a
-    kernel it does not compile, returns at once.  Only the time changes: the run
-    then loads the kernel or compiles it as it would have.
-
-    Returns
-    -------
-    bool
-        True when the kernel is in the cache after the wait.
-    """
-    from ._jit import kernels_cached
-
-    active = _active
-    if active is None or spec not in active[1]:
-        return False
-    proc = active[0]
-    deadline = time.monotonic() + timeout
-    while True:
-        cached = kernels_cached(kernels=(spec,))
-        if cached is not False:  # in the cache, or cannot tell: no use waiting
-            return bool(cached)
-        if proc.poll() is not None or time.monotonic() >= deadline:
-            return False
-        time.sleep(poll)
 
 
 def finish(proc: subprocess.Popen | None, timeout: float = 1.0) -> None:
@@ -165,11 +123,9 @@ def finish(proc: subprocess.Popen | None, timeout: float = 1.0) -> None:
     run compiled (and cached) itself.  It gets ``timeout`` seconds to finish the
     kernel it is on; a kernel it was writing is left out of the cache, never half
     written."""
-    global _active
     if proc is None:
         return
-    if _active is not None and _active[0] is proc:
-        _active = None
+    clear_helper(proc)
     try:
         proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:

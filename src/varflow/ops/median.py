@@ -17,8 +17,7 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
-from .. import _warm
-from .._jit import FASTMATH, FASTMATH_NO_REASSOC
+from .._jit import FASTMATH, FASTMATH_NO_REASSOC, await_kernel
 from ._median_network import median25
 from .fusion import _exp_neg_row
 
@@ -579,8 +578,7 @@ def weighted_median_flow(
     if pixels.size == 0:
         return np.moveaxis(out, 0, -1)
     vis = flow_visibility(np.moveaxis(src, 0, -1), sigma_divergence)
-    if _warm._active is not None:  # a first run: the helper may have it in a moment
-        _warm.await_kernel(f"{__name__}:_weighted_median_kernel")
+    await_kernel(f"{__name__}:_weighted_median_kernel")  # a first run's helper has it soon
     _weighted_median_kernel(
         src, np.ascontiguousarray(np.moveaxis(g, -1, 0)), vis, pixels, int(radius),
         _space_weights(radius, sigma_space), _colour_scale(sigma_colour, g.shape[2]), out,
