@@ -77,6 +77,7 @@ def _warm_tvl1() -> None:
 
 _WARMERS: dict[str, Callable[[], None]] = {"tvl1": _warm_tvl1}
 
+
 def warm_up(method: str) -> None:
     """Compile (or load) the late kernels of ``method`` in this process.
 

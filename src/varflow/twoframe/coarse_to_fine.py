@@ -471,31 +471,28 @@ def run_levels(
     return flows
 
 
+def _stack_memory(n: int, shape: tuple[int, ...], planar: bool) -> np.ndarray:
+    """New float32 memory for ``n`` flows of ``shape``, seen as ``(n, h, w, 2)``: planar
+    ``(n, 2, h, w)`` underneath when ``planar``."""
+    if planar:
+        return np.moveaxis(np.empty((n, 2) + tuple(shape), np.float32), 1, -1)
+    return np.empty((n,) + tuple(shape) + (2,), np.float32)
+
+
 def _planar_stack(flows: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
     """The ``(h, w, 2)`` flows as a ``(K, h, w, 2)`` view of new planar memory
     ``(K, 2, h, w)``."""
-    store = np.empty((len(flows), 2) + tuple(shape), np.float32)
-    view = np.moveaxis(store, 1, -1)
+    view = _stack_memory(len(flows), shape, True)
     for k, f in enumerate(flows):
         view[k] = f
     return view
 
 
 def _resize_stack(flows: np.ndarray, shape: tuple[int, ...], planar: bool) -> np.ndarray:
-    """The ``(K, h, w, 2)`` flows resized to ``shape`` (:func:`resize_flow`), into
-    new memory resized one at a time (no list of K resized flows beside the stack):
-    planar ``(K, 2, h, w)`` seen as ``(K, h, w, 2)`` when ``planar``, else
-    ``(K, h, w, 2)``."""
-    n = len(flows)
-    if n == 0:
-        return np.empty((0,) + tuple(shape) + (2,), np.float32)
-    if planar:
-        view = np.moveaxis(np.empty((n, 2) + tuple(shape), np.float32), 1, -1)
-    else:
-        view = None
+    """The ``(K, h, w, 2)`` flows resized to ``shape`` (:func:`resize_flow`) one at a
+    time into new memory (:func:`_stack_memory`; no list of K resized flows beside the
+    stack)."""
+    out = _stack_memory(len(flows), shape, planar)
     for k, f in enumerate(flows):
-        r = resize_flow(f, shape)
-        if view is None:
-            view = np.empty((n,) + r.shape, r.dtype)
-        view[k] = r
-    return view
+        out[k] = resize_flow(f, shape)
+    return out
