@@ -148,8 +148,15 @@ def measure(kind: str, method: str, shape: tuple[int, int], channels: int,
     call reuses, and lower its peak)."""
     spec = {"kind": kind, "method": method, "shape": list(shape), "channels": channels,
             "frames": n_frames, "prime": prime}
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", VARFLOW_MEMORY_LIMIT="off")
-    proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--child",
+    return run_child(__file__, spec, NUMBA_NUM_THREADS="1")
+
+
+def run_child(script: str, spec: dict, **env: str) -> dict | None:
+    """Run ``script --child JSON(spec)`` in a fresh interpreter with ``env`` added to
+    the environment (and ``VARFLOW_MEMORY_LIMIT=off``); the JSON of its last stdout
+    line, or None (and the error on stderr) if it fails."""
+    env = dict(os.environ, VARFLOW_MEMORY_LIMIT="off", **env)
+    proc = subprocess.run([sys.executable, os.path.abspath(script), "--child",
                            json.dumps(spec)], env=env, capture_output=True, text=True)
     lines = proc.stdout.strip().splitlines()
     if proc.returncode != 0 or not lines:

@@ -34,12 +34,11 @@ import gc
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from bench_memory import _status
+from bench_memory import _status, run_child
 
 MIB = 2**20
 GIB = 2**30
@@ -113,15 +112,8 @@ def child(spec: dict) -> dict:
 
 
 def measure(spec: dict) -> dict | None:
-    """Run :func:`child` in a fresh interpreter; None (error on stderr) if it fails."""
-    env = dict(os.environ, VARFLOW_MEMORY_LIMIT="off")
-    proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--child",
-                           json.dumps(spec)], env=env, capture_output=True, text=True)
-    lines = proc.stdout.strip().splitlines()
-    if proc.returncode != 0 or not lines:
-        print(f"  FAILED ({proc.returncode}): {proc.stderr.strip()[-2000:]}", file=sys.stderr)
-        return None
-    return json.loads(lines[-1])
+    """Run :func:`child` in a fresh interpreter (default threads); None if it fails."""
+    return run_child(__file__, spec)
 
 
 def table(rows: list[dict]) -> list[str]:
