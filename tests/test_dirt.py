@@ -131,12 +131,47 @@ def test_sensitivity_trades_recall_for_precision() -> None:
     assert _scores(masks[0.5], truth)[1] < _scores(masks[2.0], truth)[1]
 
 
+def test_two_toned_spikes_are_not_dirt_and_the_ends_need_more() -> None:
+    """On a still clip (exact zero flows): a patch of frame 2 replaced by other texture
+    (darker and brighter than both neighbours: what a lost moving object looks like)
+    is dropped by the ``mixed`` test and kept without it (0.5); a one-toned blotch is
+    found either way.  A spike of 26 levels on the last frame is found with ``ends`` 1
+    and left with the default 1.5 (its threshold 30; ``window`` 0 so that the seed is
+    the spike itself), a spike of 60 in every run."""
+    rng = np.random.default_rng(11)
+    base = cv2.GaussianBlur(rng.standard_normal((64, 80, 3)).astype(np.float32), (0, 0), 3.0)
+    clip = np.repeat((128 + 30 * base / base.std())[None], 5, axis=0)
+    other = cv2.GaussianBlur(rng.standard_normal((14, 14, 3)).astype(np.float32), (0, 0), 1.0)
+    clip[2, 8:22, 8:22] = 128 + 70 * other / other.std()  # two-toned: texture
+    clip[2, 40:50, 50:60] -= 70.0                           # one-toned: a dark blotch
+    clip[4, 10:18, 60:68] -= 26.0                           # faint, on the last frame
+    clip[4, 44:52, 10:18] += 60.0                           # clear, on the last frame
+    clip = np.clip(clip, 0.0, 255.0)
+    zeros = np.zeros((4, 64, 80, 2), np.float32)
+    texture, faint = (2, slice(8, 22), slice(8, 22)), (4, slice(10, 18), slice(60, 68))
+    found = {}
+    for key, over in (("default", {"window": 0}), ("no mixed", {"mixed": 0.5}),
+                      ("ends 1", {"ends": 1.0, "window": 0})):
+        _, found[key] = remove_dirt(clip, return_mask=True, flows=(zeros, zeros), **over)
+        m = found[key]
+        assert m[2, 40:50, 50:60].all() and m[4, 44:52, 10:18].all(), key
+    assert found["default"][texture].mean() < 0.05, found["default"][texture].mean()  # 0
+    assert found["no mixed"][texture].mean() > 0.5, found["no mixed"][texture].mean()  # 0.94
+    assert not found["default"][faint].any()
+    assert found["ends 1"][faint].all()
+    assert found["ends 1"].sum() == found["default"].sum() + 64  # nothing else changes
+
+
 def test_parameters_are_checked() -> None:
     clip = _moving_clip(3)
     with pytest.raises(ValueError, match="sensitivity"):
         remove_dirt(clip, sensitivity=0)
     with pytest.raises(ValueError, match="low"):
         DirtParams(low=1.5)
+    with pytest.raises(ValueError, match="mixed"):
+        DirtParams(mixed=0.6)
+    with pytest.raises(ValueError, match="ends"):
+        DirtParams(ends=0.5)
     with pytest.raises(ValueError, match="window"):
         remove_dirt(clip, window=1.5)
     with pytest.raises(ValueError, match="no_such_knob"):
