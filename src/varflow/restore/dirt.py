@@ -337,16 +337,16 @@ def _score(frame: np.ndarray, cand: _Frame, p: DirtParams
         bright[none] = 0.0
         return dark, bright
 
-    rim = np.maximum(*below_above(lo, hi))
+    dark, bright = below_above(lo, hi)
+    rim = np.maximum(dark, bright)
     grow = rim - penalty
-    if p.window > 0:
+    if p.window > 0:  # the seeds' (and the mixed test's) range over the window
         k = np.ones((2 * p.window + 1, 2 * p.window + 1), np.uint8)
         lo = cv2.erode(lo, k, borderType=cv2.BORDER_REPLICATE).reshape(frame.shape)
         hi = cv2.dilate(hi, k, borderType=cv2.BORDER_REPLICATE).reshape(frame.shape)
         dark, bright = below_above(lo, hi)
         seed = np.maximum(dark, bright) - penalty
     else:
-        dark, bright = below_above(lo, hi)
         seed = grow.copy()
     seed[fa != fb] = -np.inf  # one neighbour outside the picture: one-sided, no seed
     va, vb = cand.visible
